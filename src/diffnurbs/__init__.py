@@ -1,0 +1,21 @@
+"""Differentiable Bezier, B-spline and NURBS curves and surfaces in JAX."""
+
+from ._basis import (
+    basis_funs as basis_funs,
+    bernstein as bernstein,
+    cox_de_boor as cox_de_boor,
+    ders_basis_funs as ders_basis_funs,
+    find_span as find_span,
+)
+from ._bezier import de_casteljau as de_casteljau, de_casteljau_surface as de_casteljau_surface
+from ._curve import NURBSCurve as NURBSCurve
+from ._knots import clamped_knots as clamped_knots
+from ._rational import (
+    from_homogeneous as from_homogeneous,
+    rational_curve_derivatives as rational_curve_derivatives,
+    rational_surface_derivatives as rational_surface_derivatives,
+    to_homogeneous as to_homogeneous,
+)
+from ._surface import NURBSSurface as NURBSSurface
+
+__version__ = "0.1.0"

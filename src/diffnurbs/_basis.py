@@ -1,0 +1,217 @@
+"""B-spline and Bernstein basis functions.
+
+The degree is always a Python int, so the loops below unroll at trace time and every
+function is a fixed expression graph of array operations: `jit`, `vmap` and `grad`
+(with respect to the knots as well as the parameter) work on all of them.
+"""
+
+import math
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float, Int
+
+from ._validate import check_degree, check_order
+
+
+def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
+    """Index `i` of the knot span `[knots[i], knots[i + 1])` that holds `u`.
+
+    The search is a vectorised binary search (`jnp.searchsorted`), clipped into
+    `[degree, n]` with `n = len(knots) - degree - 2`: the last knot belongs to the last
+    non-empty span, and parameters outside the domain fall into the first or last span.
+
+    **Arguments:**
+
+    - `knots`: non-decreasing knot vector of length `n + degree + 2`.
+    - `degree`: the degree `p >= 0`.
+    - `u`: parameters, any shape.
+
+    **Returns:**
+
+    Integer array of the shape of `u`.
+    """
+    knots = jnp.asarray(knots)
+    last = knots.shape[0] - degree - 2
+    span = jnp.searchsorted(knots, jnp.asarray(u), side="right") - 1
+    return jnp.clip(span, degree, last)
+
+
+def _safe_divide(num, den):
+    # The double `where` keeps gradients finite: 0/0 is defined as 0 and the unused
+    # branch never sees a zero denominator.
+    zero = den == 0
+    return jnp.where(zero, 0.0, num / jnp.where(zero, 1.0, den))
+
+
+def _local_knots(knots, degree, span, u):
+    """`left[j] = u - U[span + 1 - j]`, `right[j] = U[span + j] - u` for j = 0..p."""
+    left = [u - knots[span + 1 - j] for j in range(degree + 1)]
+    right = [knots[span + j] - u for j in range(degree + 1)]
+    return left, right
+
+
+def basis_funs(
+    knots: ArrayLike, degree: int, u: ArrayLike
+) -> tuple[Int[Array, "..."], Float[Array, "... p+1"]]:
+    """The `degree + 1` non-zero B-spline basis functions at `u` (NURBS Book A2.2).
+
+    **Arguments:**
+
+    - `knots`: non-decreasing knot vector.
+    - `degree`: the degree `p`.
+    - `u`: parameters, any shape.
+
+    **Returns:**
+
+    `(span, N)` where `span` has the shape of `u` and `N[..., r]` is
+    `N_{span - p + r, p}(u)`, shape `u.shape + (p + 1,)`.
+    """
+    check_degree(degree, minimum=0)
+    knots = jnp.asarray(knots)
+    u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
+    span = find_span(knots, degree, u)
+    left, right = _local_knots(knots, degree, span, u)
+    funs = [jnp.ones_like(u)]
+    for j in range(1, degree + 1):
+        saved = jnp.zeros_like(u)
+        new = []
+        for r in range(j):
+            temp = _safe_divide(funs[r], right[r + 1] + left[j - r])
+            new.append(saved + right[r + 1] * temp)
+            saved = left[j - r] * temp
+        funs = [*new, saved]
+    return span, jnp.stack(funs, axis=-1)
+
+
+def _ndu_table(left, right, degree, u):
+    """Triangular table of A2.3: basis functions (upper) and knot differences (lower)."""
+    ndu = [[None] * (degree + 1) for _ in range(degree + 1)]
+    ndu[0][0] = jnp.ones_like(u)
+    for j in range(1, degree + 1):
+        saved = jnp.zeros_like(u)
+        for r in range(j):
+            ndu[j][r] = right[r + 1] + left[j - r]
+            temp = _safe_divide(ndu[r][j - 1], ndu[j][r])
+            ndu[r][j] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        ndu[j][j] = saved
+    return ndu
+
+
+def _derivative_row(ndu, degree, r, order):
+    """Derivatives 1..order of `N_{span - p + r, p}` from the table (inner loops of A2.3)."""
+    p = degree
+    row = []
+    a_prev = {0: jnp.ones_like(ndu[0][0])}
+    for k in range(1, order + 1):
+        a = {}
+        d = jnp.zeros_like(ndu[0][0])
+        rk, pk = r - k, p - k
+        if r >= k:
+            a[0] = _safe_divide(a_prev[0], ndu[pk + 1][rk])
+            d = a[0] * ndu[rk][pk]
+        j1 = 1 if rk >= -1 else -rk
+        j2 = k - 1 if r - 1 <= pk else p - r
+        for j in range(j1, j2 + 1):
+            a[j] = _safe_divide(a_prev[j] - a_prev[j - 1], ndu[pk + 1][rk + j])
+            d = d + a[j] * ndu[rk + j][pk]
+        if r <= pk:
+            a[k] = _safe_divide(-a_prev[k - 1], ndu[pk + 1][r])
+            d = d + a[k] * ndu[r][pk]
+        row.append(d * (math.factorial(p) // math.factorial(p - k)))
+        a_prev = a
+    return row
+
+
+def ders_basis_funs(
+    knots: ArrayLike, degree: int, u: ArrayLike, n: int
+) -> tuple[Int[Array, "..."], Float[Array, "... n+1 p+1"]]:
+    """Non-zero basis functions and their derivatives up to order `n` (NURBS Book A2.3).
+
+    Derivatives of order above the degree are exactly zero.
+
+    **Arguments:**
+
+    - `knots`: non-decreasing knot vector.
+    - `degree`: the degree `p`.
+    - `u`: parameters, any shape.
+    - `n`: highest derivative order, `n >= 0`.
+
+    **Returns:**
+
+    `(span, ders)` with `ders[..., k, r]` the k-th derivative of `N_{span - p + r, p}` at
+    `u`, shape `u.shape + (n + 1, p + 1)`.
+    """
+    check_degree(degree, minimum=0)
+    n = check_order(n)
+    knots = jnp.asarray(knots)
+    u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
+    span = find_span(knots, degree, u)
+    left, right = _local_knots(knots, degree, span, u)
+    ndu = _ndu_table(left, right, degree, u)
+    top = min(n, degree)
+    columns = []
+    for r in range(degree + 1):
+        column = [ndu[r][degree], *_derivative_row(ndu, degree, r, top)]
+        column += [jnp.zeros_like(u)] * (n - top)
+        columns.append(jnp.stack(column, axis=-1))
+    return span, jnp.stack(columns, axis=-1)
+
+
+def cox_de_boor(knots: ArrayLike, degree: int, i: int, u: ArrayLike) -> Float[Array, "..."]:
+    """`N_{i,p}(u)` by the recursive Cox–de Boor definition, for teaching and testing.
+
+    Degree 0 uses half-open spans `[u_i, u_{i+1})`, except that the last non-empty span
+    also holds its right end, so the basis sums to one on the closed domain. Terms with
+    a zero denominator are taken as zero (the 0/0 = 0 convention).
+
+    **Arguments:**
+
+    - `knots`: knot vector.
+    - `degree`: the degree `p`.
+    - `i`: index of the basis function, `0 <= i < len(knots) - p - 1`.
+    - `u`: parameters, any shape.
+
+    **Returns:**
+
+    `N_{i,p}(u)` with the shape of `u`.
+    """
+    check_degree(degree, minimum=0)
+    knots = jnp.asarray(knots)
+    u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
+    if not 0 <= i < knots.shape[0] - degree - 1:
+        raise ValueError(
+            f"basis index i must be in [0, {knots.shape[0] - degree - 2}] for "
+            f"{knots.shape[0]} knots and degree {degree}, got {i}"
+        )
+    if degree == 0:
+        inside = (knots[i] <= u) & (u < knots[i + 1])
+        # The closed end: u == u_max belongs to the last span of positive length.
+        last_nonempty = (knots[i] < knots[i + 1]) & jnp.all(knots[i + 1 :] == knots[i + 1])
+        at_end = last_nonempty & (u == knots[i + 1])
+        return jnp.where(inside | at_end, 1.0, 0.0).astype(u.dtype)
+    rising = _safe_divide(u - knots[i], knots[i + degree] - knots[i])
+    falling = _safe_divide(knots[i + degree + 1] - u, knots[i + degree + 1] - knots[i + 1])
+    return rising * cox_de_boor(knots, degree - 1, i, u) + falling * cox_de_boor(
+        knots, degree - 1, i + 1, u
+    )
+
+
+def bernstein(degree: int, t: ArrayLike) -> Float[Array, "... n+1"]:
+    """All Bernstein polynomials `B_{i,n}(t) = C(n, i) t^i (1 - t)^(n - i)`.
+
+    **Arguments:**
+
+    - `degree`: the degree `n >= 0`.
+    - `t`: parameters, any shape.
+
+    **Returns:**
+
+    Array of shape `t.shape + (n + 1,)`.
+    """
+    check_degree(degree, minimum=0)
+    t = jnp.asarray(t, dtype=jnp.result_type(t, float))
+    binomials = jnp.array([math.comb(degree, k) for k in range(degree + 1)], dtype=t.dtype)
+    # Integer powers keep t**0 == 1 at t == 0 and have finite gradients everywhere.
+    powers = [t**k * (1 - t) ** (degree - k) for k in range(degree + 1)]
+    return binomials * jnp.stack(powers, axis=-1)

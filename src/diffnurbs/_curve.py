@@ -1,0 +1,201 @@
+"""NURBS curves: evaluation, derivatives and differential geometry."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ._basis import basis_funs, ders_basis_funs
+from ._knots import clamped_knots
+from ._rational import from_homogeneous, rational_curve_derivatives, to_homogeneous
+from ._validate import (
+    check_control_count,
+    check_degree,
+    check_finite,
+    check_knots,
+    check_order,
+    check_parameter,
+    check_rank,
+    check_weights,
+    concrete,
+    float_dtype,
+)
+
+# Gauss-Legendre rule used by `arc_length` on each quarter of every knot span.
+_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(24)
+_SUBDIVISIONS = 4
+
+
+def safe_sqrt(x: Array) -> Array:
+    """Square root with a zero (not infinite) gradient at zero; negatives map to zero."""
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+
+
+def safe_norm(x: Array, axis: int = -1) -> Array:
+    """Euclidean norm whose gradient is zero, not NaN, at the zero vector."""
+    return safe_sqrt(jnp.sum(x * x, axis=axis))
+
+
+def safe_normalize(x: Array) -> Array:
+    """`x / |x|` along the last axis; the zero vector maps to zero."""
+    norm = safe_norm(x)[..., None]
+    return jnp.where(norm > 0, x / jnp.where(norm > 0, norm, 1.0), 0.0)
+
+
+def clamp_to_domain(u: Array, lower: Array, upper: Array) -> Array:
+    # `where` rather than `clip`: at u == lower the gradient must pass through whole
+    # (jnp.clip would split it between u and the bound).
+    return jnp.where(u < lower, lower, jnp.where(u > upper, upper, u))
+
+
+def local_indices(span: Array, degree: int) -> Array:
+    """Indices `span - p, ..., span` of the control points that act on a span."""
+    return span[..., None] - degree + jnp.arange(degree + 1)
+
+
+class NURBSCurve(eqx.Module):
+    """A (rational) B-spline curve `C(u) = sum_i N_{i,p}(u) w_i P_i / sum_i N_{i,p}(u) w_i`.
+
+    Bezier curves are the special case of `degree = len(control_points) - 1` with the
+    default knots; `weights=None` gives a non-rational B-spline. All array fields are
+    pytree leaves, so `jax.grad` reaches control points, weights and knots.
+
+    Parameters outside the domain raise `ValueError` when they are concrete; under `jit`
+    they are clamped to the nearest end of the domain.
+    """
+
+    control_points: Float[Array, "n dim"]
+    weights: Float[Array, " n"] | None
+    knots: Float[Array, " n+p+1"]
+    degree: int = eqx.field(static=True)
+
+    def __init__(
+        self,
+        control_points: ArrayLike,
+        degree: int,
+        knots: ArrayLike | None = None,
+        weights: ArrayLike | None = None,
+    ):
+        """**Arguments:**
+
+        - `control_points`: array of shape `(n + 1, dim)`.
+        - `degree`: the degree `p`, `1 <= p <= n`.
+        - `knots`: `n + p + 2` non-decreasing knots; None gives clamped uniform knots on [0, 1].
+        - `weights`: `n + 1` positive weights; None gives a non-rational curve.
+        """
+        self.degree = check_degree(degree)
+        points = jnp.asarray(control_points)
+        check_rank(points, 2, "control_points", "(n_control, dim)")
+        check_control_count(points.shape[0], self.degree)
+        dtype = float_dtype(points, *(x for x in (knots, weights) if x is not None))
+        self.control_points = check_finite(points.astype(dtype), "control_points")
+        if knots is None:
+            knots = clamped_knots(points.shape[0], self.degree, dtype=dtype)
+        knots = jnp.asarray(knots, dtype=dtype)
+        self.knots = check_knots(knots, points.shape[0], self.degree)
+        if weights is not None:
+            weights = check_weights(jnp.asarray(weights, dtype=dtype), points.shape[:1])
+        self.weights = weights
+
+    @property
+    def rational(self) -> bool:
+        return self.weights is not None
+
+    @property
+    def dim(self) -> int:
+        return self.control_points.shape[1]
+
+    @property
+    def domain(self) -> tuple[Array, Array]:
+        """`(knots[p], knots[n + 1])`, the parameter interval."""
+        return self.knots[self.degree], self.knots[-self.degree - 1]
+
+    def homogeneous_points(self) -> Float[Array, "n dim+1"]:
+        """Control points as `(w P, w)`; the plain points when the curve is not rational."""
+        if self.weights is None:
+            return self.control_points
+        return to_homogeneous(self.control_points, self.weights)
+
+    def _parameters(self, u: ArrayLike) -> Array:
+        u = jnp.asarray(u, dtype=self.knots.dtype)
+        lower, upper = self.domain
+        check_parameter(u, lower, upper)
+        return clamp_to_domain(u, lower, upper)
+
+    def __call__(self, u: ArrayLike) -> Float[Array, "... dim"]:
+        """Points `C(u)` for parameters of any shape; returns `u.shape + (dim,)`."""
+        u = self._parameters(u)
+        span, funs = basis_funs(self.knots, self.degree, u)
+        local = self.homogeneous_points()[local_indices(span, self.degree)]
+        points = jnp.einsum("...r,...rd->...d", funs, local)
+        return from_homogeneous(points) if self.rational else points
+
+    def derivatives(self, u: ArrayLike, order: int) -> Float[Array, "... order+1 dim"]:
+        """`C(u), C'(u), ..., C^(order)(u)`: CurveDerivs, then the Leibniz rule if rational.
+
+        **Arguments:**
+
+        - `u`: parameters, any shape.
+        - `order`: highest derivative order, `>= 0`.
+
+        **Returns:**
+
+        Array of shape `u.shape + (order + 1, dim)`.
+        """
+        order = check_order(order)
+        u = self._parameters(u)
+        span, ders = ders_basis_funs(self.knots, self.degree, u, order)
+        local = self.homogeneous_points()[local_indices(span, self.degree)]
+        homogeneous = jnp.einsum("...kr,...rd->...kd", ders, local)
+        if not self.rational:
+            return homogeneous
+        return rational_curve_derivatives(homogeneous[..., :-1], homogeneous[..., -1])
+
+    def tangent(self, u: ArrayLike) -> Float[Array, "... dim"]:
+        """Unit tangent `C'(u) / |C'(u)|`; zero where the curve has zero speed."""
+        return safe_normalize(self.derivatives(u, 1)[..., 1, :])
+
+    def curvature(self, u: ArrayLike) -> Float[Array, "..."]:
+        """Curvature: signed `(x'y'' - y'x'') / |C'|^3` in 2D, `|C' x C''| / |C'|^3` otherwise.
+
+        Zero where the speed is zero. Needs `dim >= 2`.
+        """
+        if self.dim < 2:
+            raise ValueError(f"curvature needs a curve of dimension >= 2, got dim = {self.dim}")
+        ders = self.derivatives(u, 2)
+        d1, d2 = ders[..., 1, :], ders[..., 2, :]
+        if self.dim == 2:
+            bend = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]
+        elif self.dim == 3:
+            bend = safe_norm(jnp.cross(d1, d2))
+        else:
+            # |d1|^2 |d2|^2 - (d1.d2)^2 = |d1 x d2|^2 in any dimension (Lagrange's identity).
+            gram = jnp.sum(d1 * d1, -1) * jnp.sum(d2 * d2, -1) - jnp.sum(d1 * d2, -1) ** 2
+            bend = safe_sqrt(gram)
+        speed3 = safe_norm(d1) ** 3
+        return jnp.where(speed3 > 0, bend / jnp.where(speed3 > 0, speed3, 1.0), 0.0)
+
+    def arc_length(self, a: ArrayLike | None = None, b: ArrayLike | None = None) -> Array:
+        """Length of the curve between parameters `a` and `b` (default: the whole domain).
+
+        Gauss-Legendre quadrature (24 nodes) on each quarter of every knot span, so the
+        integrand is smooth on every piece.
+        """
+        lower, upper = self.domain
+        a = lower if a is None else jnp.asarray(a, dtype=self.knots.dtype)
+        b = upper if b is None else jnp.asarray(b, dtype=self.knots.dtype)
+        check_parameter(jnp.stack([a, b]), lower, upper, name="(a, b)")
+        ends = concrete(jnp.stack([a, b]))
+        if ends is not None and ends[0] > ends[1]:
+            raise ValueError(f"arc_length needs a <= b, got a = {ends[0]}, b = {ends[1]}")
+        breaks = jnp.clip(self.knots, a, b)
+        fractions = jnp.linspace(0.0, 1.0, _SUBDIVISIONS + 1, dtype=breaks.dtype)
+        pieces = breaks[:-1, None] + (breaks[1:] - breaks[:-1])[:, None] * fractions
+        lo, hi = pieces[:, :-1].ravel(), pieces[:, 1:].ravel()
+        nodes = jnp.asarray(_GAUSS_NODES, dtype=breaks.dtype)
+        weights = jnp.asarray(_GAUSS_WEIGHTS, dtype=breaks.dtype)
+        half = 0.5 * (hi - lo)
+        u = (lo + hi)[:, None] * 0.5 + half[:, None] * nodes
+        speed = safe_norm(self.derivatives(u, 1)[..., 1, :])
+        return jnp.sum(half * jnp.sum(weights * speed, axis=-1))

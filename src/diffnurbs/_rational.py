@@ -1,0 +1,96 @@
+"""Homogeneous coordinates and the Leibniz rule for derivatives of rational maps.
+
+A rational curve is the projection of a polynomial curve `Cw = (w C, w)` one dimension
+up. Its derivatives follow from those of `A = w C` and `w` (seed 000 eq. 1.26,
+NURBS Book A4.2 and A4.4) without differentiating a quotient.
+"""
+
+import math
+
+import jax.numpy as jnp
+from jaxtyping import Array, ArrayLike, Float
+
+
+def to_homogeneous(points: ArrayLike, weights: ArrayLike) -> Float[Array, "... dim+1"]:
+    """`(w P, w)`: weighted points with the weight appended as a last coordinate.
+
+    **Arguments:**
+
+    - `points`: array of shape `(..., dim)`.
+    - `weights`: array of shape `(...)`.
+
+    **Returns:**
+
+    Array of shape `(..., dim + 1)`.
+    """
+    points, weights = jnp.asarray(points), jnp.asarray(weights)
+    return jnp.concatenate([points * weights[..., None], weights[..., None]], axis=-1)
+
+
+def from_homogeneous(points: ArrayLike) -> Float[Array, "... dim"]:
+    """The projection `(x, w) -> x / w`, inverse of `to_homogeneous`.
+
+    **Arguments:**
+
+    - `points`: array of shape `(..., dim + 1)`, last coordinate the weight.
+
+    **Returns:**
+
+    Array of shape `(..., dim)`.
+    """
+    points = jnp.asarray(points)
+    return points[..., :-1] / points[..., -1:]
+
+
+def rational_curve_derivatives(
+    a_ders: Float[Array, "... k dim"], w_ders: Float[Array, "... k"]
+) -> Float[Array, "... k dim"]:
+    """Derivatives of `C = A / w` from those of `A` and `w` (seed Listing 1.6, A4.2).
+
+    `C^(k) = (A^(k) - sum_{i=1}^{k} binom(k, i) w^(i) C^(k-i)) / w`.
+
+    **Arguments:**
+
+    - `a_ders`: `A^(0..d)`, shape `(..., d + 1, dim)`.
+    - `w_ders`: `w^(0..d)`, shape `(..., d + 1)`.
+
+    **Returns:**
+
+    `C^(0..d)`, shape `(..., d + 1, dim)`.
+    """
+    ders = []
+    for k in range(a_ders.shape[-2]):
+        v = a_ders[..., k, :]
+        for i in range(1, k + 1):
+            v = v - math.comb(k, i) * w_ders[..., i, None] * ders[k - i]
+        ders.append(v / w_ders[..., 0, None])
+    return jnp.stack(ders, axis=-2)
+
+
+def rational_surface_derivatives(
+    a_ders: Float[Array, "... k l dim"], w_ders: Float[Array, "... k l"]
+) -> Float[Array, "... k l dim"]:
+    """Mixed partial derivatives of `S = A / w` (NURBS Book A4.4, for every k and l).
+
+    **Arguments:**
+
+    - `a_ders`: `d^(k+l) A / du^k dv^l`, shape `(..., K + 1, L + 1, dim)`.
+    - `w_ders`: the same for `w`, shape `(..., K + 1, L + 1)`.
+
+    **Returns:**
+
+    The derivatives of `S`, shape `(..., K + 1, L + 1, dim)`.
+    """
+    rows, cols = a_ders.shape[-3], a_ders.shape[-2]
+    skl = [[None] * cols for _ in range(rows)]
+    for k in range(rows):
+        for l in range(cols):
+            v = a_ders[..., k, l, :]
+            for i in range(k + 1):
+                for j in range(l + 1):
+                    if i == j == 0:
+                        continue
+                    coeff = math.comb(k, i) * math.comb(l, j)
+                    v = v - coeff * w_ders[..., i, j, None] * skl[k - i][l - j]
+            skl[k][l] = v / w_ders[..., 0, 0, None]
+    return jnp.stack([jnp.stack(row, axis=-2) for row in skl], axis=-3)

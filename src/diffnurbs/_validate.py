@@ -1,0 +1,124 @@
+"""Input checks shared by curves and surfaces.
+
+Concrete arrays are checked eagerly and raise `ValueError` naming the problem and the
+expected value. Traced arrays (inside `jit` or `grad`) cannot be inspected, so value
+checks there go through `eqx.error_if`, which raises when the compiled code runs.
+Shape checks are static and always raise `ValueError`.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def concrete(x):
+    """`x` as a NumPy array, or None when it is traced."""
+    try:
+        return np.asarray(x)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return None
+
+
+def float_dtype(*arrays):
+    """The common floating dtype of the inputs (float32 unless x64 is enabled)."""
+    return jnp.result_type(*[a.dtype for a in arrays if hasattr(a, "dtype")], float)
+
+
+def check_degree(degree, minimum=1, name="degree"):
+    if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)):
+        raise ValueError(f"{name} must be a Python int, got {degree!r}")
+    if degree < minimum:
+        raise ValueError(f"{name} must be >= {minimum}, got {degree}")
+    return int(degree)
+
+
+def check_rank(x, ndim, name, layout):
+    if x.ndim != ndim:
+        raise ValueError(f"{name} must have {ndim} dimensions {layout}, got shape {x.shape}")
+
+
+def check_finite(x, name):
+    values = concrete(x)
+    if values is None:
+        return eqx.error_if(x, ~jnp.all(jnp.isfinite(x)), f"{name} must be finite")
+    if not np.all(np.isfinite(values)):
+        where = tuple(int(i) for i in np.argwhere(~np.isfinite(values))[0])
+        raise ValueError(f"{name} must be finite, got {values[where]} at index {where}")
+    return x
+
+
+def check_weights(weights, shape, name="weights"):
+    if weights.shape != shape:
+        raise ValueError(f"{name} must have shape {shape} (one per control point), got {weights.shape}")
+    values = concrete(weights)
+    if values is None:
+        bad = ~jnp.all(jnp.isfinite(weights) & (weights > 0))
+        return eqx.error_if(weights, bad, f"{name} must be finite and positive")
+    if not np.all(np.isfinite(values) & (values > 0)):
+        where = tuple(int(i) for i in np.argwhere(~(np.isfinite(values) & (values > 0)))[0])
+        raise ValueError(f"{name} must be finite and positive, got {values[where]} at index {where}")
+    return weights
+
+
+def check_knots(knots, n_control, degree, name="knots"):
+    """Length n + p + 1, finite, non-decreasing, multiplicity <= p + 1, non-empty domain."""
+    check_rank(knots, 1, name, "(a knot vector)")
+    expected = n_control + degree + 1
+    if knots.shape[0] != expected:
+        raise ValueError(
+            f"expected {expected} {name} (n + p + 1 = {n_control} control points + degree "
+            f"{degree} + 1), got {knots.shape[0]}"
+        )
+    values = concrete(knots)
+    if values is None:
+        bad = ~jnp.all(jnp.isfinite(knots)) | jnp.any(jnp.diff(knots) < 0)
+        bad = bad | ~(knots[degree] < knots[n_control])
+        return eqx.error_if(knots, bad, f"{name} must be finite, non-decreasing, with a non-empty domain")
+    check_finite(knots, name)
+    steps = np.diff(values)
+    if np.any(steps < 0):
+        i = int(np.argmax(steps < 0))
+        raise ValueError(
+            f"{name} must be non-decreasing, got {name}[{i + 1}] = {values[i + 1]} < "
+            f"{name}[{i}] = {values[i]}"
+        )
+    _, counts = np.unique(values[1:-1], return_counts=True)
+    if counts.size and counts.max() > degree + 1:
+        raise ValueError(
+            f"interior {name} may repeat at most degree + 1 = {degree + 1} times, got "
+            f"{counts.max()}"
+        )
+    if not values[degree] < values[n_control]:
+        raise ValueError(
+            f"the domain [{name}[p], {name}[n + 1]] = [{values[degree]}, {values[n_control]}] "
+            "is empty; expected the two knots to differ"
+        )
+    return knots
+
+
+def check_control_count(n_control, degree, name="control points"):
+    if n_control < degree + 1:
+        raise ValueError(
+            f"degree {degree} needs at least degree + 1 = {degree + 1} {name}, got {n_control}"
+        )
+
+
+def check_parameter(u, lower, upper, name="u"):
+    """Raise for concrete parameters outside `[lower, upper]`; traced ones pass."""
+    values, lo, hi = concrete(u), concrete(lower), concrete(upper)
+    if values is None or lo is None or hi is None or values.size == 0:
+        return
+    if not np.all(np.isfinite(values)):
+        raise ValueError(f"{name} must be finite")
+    if values.min() < lo or values.max() > hi:
+        raise ValueError(
+            f"{name} must lie in the domain [{lo}, {hi}], got values in "
+            f"[{values.min()}, {values.max()}]"
+        )
+
+
+def check_order(order):
+    if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 0:
+        raise ValueError(f"derivative order must be an int >= 0, got {order!r}")
+    return int(order)

@@ -1,0 +1,96 @@
+"""pyvista meshes of curves and surfaces (pyvista is imported on first use)."""
+
+import os
+
+import numpy as np
+
+
+def _pyvista():
+    try:
+        import pyvista
+    except ImportError as error:  # the optional "viz" extra
+        raise ImportError("diffnurbs.viz needs pyvista: pip install 'diffnurbs[viz]'") from error
+    return pyvista
+
+
+def _lift_to_3d(points):
+    points = np.asarray(points, dtype=float)
+    if points.shape[-1] > 3:
+        raise ValueError(f"pyvista draws points of dimension <= 3, got {points.shape[-1]}")
+    pad = [(0, 0)] * (points.ndim - 1) + [(0, 3 - points.shape[-1])]
+    return np.pad(points, pad)
+
+
+def surface_mesh(surface, samples=(60, 60)):
+    """A `pyvista.StructuredGrid` sampling the surface on an even grid of its domain.
+
+    **Arguments:**
+
+    - `surface`: a `NURBSSurface` of dimension <= 3.
+    - `samples`: `(count along u, count along v)`.
+
+    **Returns:**
+
+    The grid, with point data `"u"` and `"v"` holding the parameters.
+    """
+    pv = _pyvista()
+    (u0, u1), (v0, v1) = surface.domain
+    us = np.linspace(float(u0), float(u1), samples[0])
+    vs = np.linspace(float(v0), float(v1), samples[1])
+    points = _lift_to_3d(surface.grid(us, vs))
+    grid = pv.StructuredGrid(points[..., 0], points[..., 1], points[..., 2])
+    # StructuredGrid stores points in Fortran order over (u, v).
+    grid["u"] = np.repeat(us[:, None], len(vs), axis=1).ravel(order="F")
+    grid["v"] = np.repeat(vs[None, :], len(us), axis=0).ravel(order="F")
+    return grid
+
+
+def control_net_mesh(control_points):
+    """The control net of a surface (or polygon of a curve) as pyvista lines.
+
+    **Arguments:**
+
+    - `control_points`: array `(nu, nv, dim)` or `(n, dim)`.
+
+    **Returns:**
+
+    A `pyvista.PolyData` of line segments through the control points.
+    """
+    pv = _pyvista()
+    points = _lift_to_3d(control_points)
+    if points.ndim == 2:
+        return pv.lines_from_points(points)
+    index = np.arange(points.shape[0] * points.shape[1]).reshape(points.shape[:2])
+    rows = [np.column_stack([row[:-1], row[1:]]) for row in index]
+    cols = [np.column_stack([col[:-1], col[1:]]) for col in index.T]
+    segments = np.concatenate(rows + cols)
+    cells = np.column_stack([np.full(len(segments), 2), segments]).ravel()
+    return pv.PolyData(points.reshape(-1, 3), lines=cells)
+
+
+def curve_polyline(curve, samples=200):
+    """A `pyvista.PolyData` polyline through `samples` points of the curve."""
+    pv = _pyvista()
+    lower, upper = curve.domain
+    points = _lift_to_3d(curve(np.linspace(float(lower), float(upper), samples)))
+    return pv.lines_from_points(points)
+
+
+def use_notebook_backend():
+    """Choose pyvista's Jupyter backend: a static image when executed headless, else interactive.
+
+    Headless means `PYVISTA_OFF_SCREEN=true` (set by `make test` and `make html`); then
+    the figure is a PNG rendered through EGL. In JupyterLab (`make lab`) the "html"
+    backend gives a rotatable vtk.js view.
+
+    **Returns:**
+
+    The name of the backend chosen.
+    """
+    # VTK picks its render window when the first one is made: set it before any render.
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    pv = _pyvista()
+    headless = os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true"
+    backend = "static" if headless else "html"
+    pv.set_jupyter_backend(backend)
+    return backend

@@ -21,7 +21,7 @@ def _casteljau(points: Array, t: Array) -> Array:
     """Repeated linear interpolation along axis -2 of `points` (seed Listing 1.1)."""
     t = t[..., None, None]
     q = jnp.broadcast_to(points, t.shape[:-2] + points.shape)
-    for k in range(1, points.shape[-2]):
+    for _ in range(1, points.shape[-2]):
         q = (1.0 - t) * q[..., :-1, :] + t * q[..., 1:, :]
     return q[..., 0, :]
 

@@ -6,7 +6,9 @@ from jaxtyping import Array, Float
 from ._validate import check_control_count, check_degree
 
 
-def clamped_knots(n_control: int, degree: int, domain=(0.0, 1.0), dtype=None) -> Float[Array, " n+p+1"]:
+def clamped_knots(
+    n_control: int, degree: int, domain=(0.0, 1.0), dtype=None
+) -> Float[Array, " n+p+1"]:
     """Clamped uniform knot vector: `degree + 1` equal knots at each end, interior evenly spaced.
 
     **Arguments:**

@@ -63,11 +63,18 @@ class NURBSSurface(eqx.Module):
         check_rank(points, 3, "control_points", "(nu, nv, dim)")
         check_control_count(points.shape[0], self.degree[0], "control points along u")
         check_control_count(points.shape[1], self.degree[1], "control points along v")
-        arrays = [points, *(() if knots is None else knots), *(() if weights is None else (weights,))]
+        arrays = [
+            points,
+            *(() if knots is None else knots),
+            *(() if weights is None else (weights,)),
+        ]
         dtype = float_dtype(*[jnp.asarray(x) for x in arrays])
         self.control_points = check_finite(points.astype(dtype), "control_points")
         if knots is None:
-            knots = tuple(clamped_knots(n, d, dtype=dtype) for n, d in zip(points.shape[:2], self.degree))
+            knots = tuple(
+                clamped_knots(n, d, dtype=dtype)
+                for n, d in zip(points.shape[:2], self.degree, strict=True)
+            )
         knots_u, knots_v = (jnp.asarray(k, dtype=dtype) for k in _pair(knots, "knots"))
         self.knots_u = check_knots(knots_u, points.shape[0], self.degree[0], "knots U")
         self.knots_v = check_knots(knots_v, points.shape[1], self.degree[1], "knots V")

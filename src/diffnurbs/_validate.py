@@ -50,14 +50,18 @@ def check_finite(x, name):
 
 def check_weights(weights, shape, name="weights"):
     if weights.shape != shape:
-        raise ValueError(f"{name} must have shape {shape} (one per control point), got {weights.shape}")
+        raise ValueError(
+            f"{name} must have shape {shape} (one per control point), got {weights.shape}"
+        )
     values = concrete(weights)
     if values is None:
         bad = ~jnp.all(jnp.isfinite(weights) & (weights > 0))
         return eqx.error_if(weights, bad, f"{name} must be finite and positive")
     if not np.all(np.isfinite(values) & (values > 0)):
         where = tuple(int(i) for i in np.argwhere(~(np.isfinite(values) & (values > 0)))[0])
-        raise ValueError(f"{name} must be finite and positive, got {values[where]} at index {where}")
+        raise ValueError(
+            f"{name} must be finite and positive, got {values[where]} at index {where}"
+        )
     return weights
 
 
@@ -74,7 +78,9 @@ def check_knots(knots, n_control, degree, name="knots"):
     if values is None:
         bad = ~jnp.all(jnp.isfinite(knots)) | jnp.any(jnp.diff(knots) < 0)
         bad = bad | ~(knots[degree] < knots[n_control])
-        return eqx.error_if(knots, bad, f"{name} must be finite, non-decreasing, with a non-empty domain")
+        return eqx.error_if(
+            knots, bad, f"{name} must be finite, non-decreasing, with a non-empty domain"
+        )
     check_finite(knots, name)
     steps = np.diff(values)
     if np.any(steps < 0):

@@ -7,9 +7,23 @@ from ._basis import (
     ders_basis_funs as ders_basis_funs,
     find_span as find_span,
 )
-from ._bezier import de_casteljau as de_casteljau, de_casteljau_surface as de_casteljau_surface
+from ._bezier import (
+    bezier_derivative_points as bezier_derivative_points,
+    bezier_matrix as bezier_matrix,
+    de_casteljau as de_casteljau,
+    de_casteljau_surface as de_casteljau_surface,
+    de_casteljau_volume as de_casteljau_volume,
+    subdivide as subdivide,
+)
 from ._curve import NURBSCurve as NURBSCurve
 from ._knots import clamped_knots as clamped_knots
+from ._patches import (
+    BEZIER_MATRIX as BEZIER_MATRIX,
+    BSPLINE_MATRIX as BSPLINE_MATRIX,
+    CATMULL_ROM_MATRIX as CATMULL_ROM_MATRIX,
+    bicubic_patch as bicubic_patch,
+    cubic_basis_matrix as cubic_basis_matrix,
+)
 from ._rational import (
     from_homogeneous as from_homogeneous,
     rational_curve_derivatives as rational_curve_derivatives,

@@ -1,10 +1,14 @@
-"""De Casteljau's algorithm for Bezier and rational Bezier curves and surfaces."""
+"""De Casteljau's algorithm for Bezier curves, surfaces and volumes; matrix form, subdivision
+and hodographs."""
+
+import math
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._rational import from_homogeneous, to_homogeneous
-from ._validate import check_rank, check_weights
+from ._validate import check_degree, check_parameter, check_rank, check_weights
 
 
 def _homogeneous_net(points, weights, rank, layout):
@@ -68,4 +72,156 @@ def de_casteljau_surface(
     u, v = jnp.broadcast_arrays(jnp.asarray(u, net.dtype), jnp.asarray(v, net.dtype))
     rows = _casteljau(net, v[..., None])  # one point per row: (..., n + 1, D)
     points = _casteljau(rows, u)
+    return from_homogeneous(points) if rational else points
+
+
+def _casteljau_batched(q: Array, t: Array) -> Array:
+    """De Casteljau along axis -2 of `q` of shape `t.shape + (..., k + 1, D)`, one `t` per
+    leading batch index (no outer product between the batch of `q` and `t`)."""
+    t = t.reshape(t.shape + (1,) * (q.ndim - t.ndim))
+    for _ in range(1, q.shape[-2]):
+        q = (1.0 - t) * q[..., :-1, :] + t * q[..., 1:, :]
+    return q[..., 0, :]
+
+
+def _check_unit_parameter(t, name):
+    check_parameter(t, 0.0, 1.0, name)
+    return t
+
+
+def bezier_matrix(degree: int, dtype=None) -> Float[Array, "n+1 n+1"]:
+    """The power-basis matrix `M_B` of the Bezier curves of a degree (seed 002).
+
+    Convention (the seed's): powers in DECREASING order in a row vector on the left,
+    control points in a column on the right,
+
+    `C(t) = [t^n, t^(n-1), ..., t, 1] @ M_B @ [P_0, ..., P_n]^T`,
+
+    so row `r` of `M_B` holds the coefficients of `t^(n - r)` and column `j` the power
+    coefficients of the Bernstein polynomial `B_{j,n}`:
+    `M_B[r, j] = (-1)^(k - j) C(n, j) C(n - j, k - j)` with `k = n - r` (zero for `k < j`).
+    For `n = 3` this is `[[-1, 3, -3, 1], [3, -6, 3, 0], [-3, 3, 0, 0], [1, 0, 0, 0]]`.
+
+    **Arguments:**
+
+    - `degree`: the degree `n >= 0`, a Python int.
+    - `dtype`: floating dtype of the result (default: JAX's default float).
+
+    **Returns:**
+
+    Array of shape `(n + 1, n + 1)`; its entries are integers.
+    """
+    n = check_degree(degree, minimum=0)
+    matrix = np.zeros((n + 1, n + 1))
+    for r in range(n + 1):
+        k = n - r
+        for j in range(k + 1):
+            matrix[r, j] = (-1) ** (k - j) * math.comb(n, j) * math.comb(n - j, k - j)
+    return jnp.asarray(matrix, dtype=dtype if dtype is not None else jnp.result_type(float))
+
+
+def subdivide(control_points: ArrayLike, t: ArrayLike, weights: ArrayLike | None = None):
+    """Split a (rational) Bezier curve at `t` into the curves on `[0, t]` and `[t, 1]`.
+
+    The control points of the two halves are the two outer edges of de Casteljau's
+    triangle: `left[k] = P_0^k` (first point of level `k`) and
+    `right[k] = P_k^(n - k)` (last point of level `n - k`). Each half, reparametrised to
+    `[0, 1]`, is the same curve: `C_left(s) = C(t s)`, `C_right(s) = C(t + (1 - t) s)`.
+    Rational curves are split in homogeneous coordinates, which also splits the weights.
+
+    **Arguments:**
+
+    - `control_points`: array of shape `(n + 1, dim)`.
+    - `t`: split parameter(s) in [0, 1], any shape.
+    - `weights`: optional positive weights of shape `(n + 1,)`.
+
+    **Returns:**
+
+    Without weights, `(left, right)`: two arrays of shape `t.shape + (n + 1, dim)`.
+    With weights, `((left, left_weights), (right, right_weights))`, the weights of shape
+    `t.shape + (n + 1,)`.
+    """
+    net, rational = _homogeneous_net(control_points, weights, 2, "(n + 1, dim)")
+    t = jnp.asarray(t, dtype=net.dtype)
+    _check_unit_parameter(t, "t")
+    tt = t[..., None, None]
+    q = jnp.broadcast_to(net, t.shape + net.shape)
+    left, right = [q[..., 0, :]], [q[..., -1, :]]
+    for _ in range(1, net.shape[0]):
+        q = (1.0 - tt) * q[..., :-1, :] + tt * q[..., 1:, :]
+        left.append(q[..., 0, :])
+        right.append(q[..., -1, :])
+    left, right = jnp.stack(left, axis=-2), jnp.stack(right[::-1], axis=-2)
+    if not rational:
+        return left, right
+    return (
+        (from_homogeneous(left), left[..., -1]),
+        (from_homogeneous(right), right[..., -1]),
+    )
+
+
+def bezier_derivative_points(control_points: ArrayLike, order: int = 1) -> Float[Array, "m dim"]:
+    """Control points of the derivative (hodograph) of a polynomial Bezier curve.
+
+    `C'(t) = sum_{i=0}^{n-1} B_{i,n-1}(t) n (P_{i+1} - P_i)`: the derivative of a degree
+    `n` Bezier curve is a Bezier curve of degree `n - 1`. With `order = k` the rule is
+    applied `k` times, giving the `n - k + 1` control points of `C^(k)`. (For rational
+    curves the derivative is not a Bezier curve of this kind: use
+    `NURBSCurve.derivatives`.)
+
+    **Arguments:**
+
+    - `control_points`: array of shape `(n + 1, dim)`.
+    - `order`: the derivative order `1 <= k <= n`.
+
+    **Returns:**
+
+    Array of shape `(n + 1 - k, dim)`.
+    """
+    points = jnp.asarray(control_points)
+    points = points.astype(jnp.result_type(points.dtype, float))
+    check_rank(points, 2, "control_points", "(n + 1, dim)")
+    order = check_degree(order, minimum=1, name="order")
+    n = points.shape[0] - 1
+    if order > n:
+        raise ValueError(
+            f"derivative order must be <= the degree n = {n} (n + 1 = {n + 1} control "
+            f"points), got {order}"
+        )
+    for k in range(order):
+        points = (n - k) * (points[1:] - points[:-1])
+    return points
+
+
+def de_casteljau_volume(
+    control_points: ArrayLike,
+    u: ArrayLike,
+    v: ArrayLike,
+    w: ArrayLike,
+    weights: ArrayLike | None = None,
+) -> Float[Array, "... dim"]:
+    """Points of a trivariate (rational) Bezier volume (seed 002).
+
+    `B(u, v, w) = sum_i sum_j sum_k B_{i,l}(u) B_{j,m}(v) B_{k,n}(w) P_{ijk}`, evaluated by
+    de Casteljau along `w`, then `v`, then `u`.
+
+    **Arguments:**
+
+    - `control_points`: array of shape `(l + 1, m + 1, n + 1, dim)`; axes 0, 1, 2 run
+      along `u`, `v`, `w`.
+    - `u`, `v`, `w`: parameters in [0, 1], broadcast against each other.
+    - `weights`: optional positive weights of shape `(l + 1, m + 1, n + 1)`.
+
+    **Returns:**
+
+    Array of shape `broadcast(u, v, w).shape + (dim,)`.
+    """
+    net, rational = _homogeneous_net(control_points, weights, 4, "(l + 1, m + 1, n + 1, dim)")
+    u, v, w = jnp.broadcast_arrays(*(jnp.asarray(x, net.dtype) for x in (u, v, w)))
+    for x, name in ((u, "u"), (v, "v"), (w, "w")):
+        _check_unit_parameter(x, name)
+    q = jnp.broadcast_to(net, u.shape + net.shape)
+    for t in (w, v, u):  # contract the last parameter axis: w, then v, then u
+        q = _casteljau_batched(q, t)
+    points = q
     return from_homogeneous(points) if rational else points

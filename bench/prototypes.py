@@ -1,6 +1,6 @@
-"""Prototype evaluation kernels measured by bench/profile.py: proposals for src/, not used by it.
+"""Prototype kernels timed by bench/profile_kernels.py: proposals for src/, unused there.
 
-What limits the current kernels on XLA:CPU (see bench/profile.py for the measurements):
+What limits the current kernels on XLA:CPU (see bench/profile_kernels.py for the measurements):
 
 - XLA emits each fusion as a loop over the output elements and recomputes, for every
   element, everything fused into it. A `(n_points, dim)` output is a concatenation, so

@@ -1,6 +1,6 @@
 """Current kernels against the prototypes of bench/prototypes.py, and the pieces of each.
 
-`.venv/bin/python bench/profile.py` prints one markdown table: nanoseconds per point in
+`.venv/bin/python bench/profile_kernels.py` prints one markdown table: nanoseconds per point in
 wall-clock and in CPU time (all threads) for each case of bench/run.py, with the fastest
 other library as the yardstick. Not part of `make bench`.
 """

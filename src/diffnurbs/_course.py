@@ -17,6 +17,7 @@ import os
 import re
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -310,7 +311,8 @@ def assign(master: Path, result: Path) -> Assigned:
     level = otter_logger.level
     otter_logger.setLevel(logging.WARNING)
     try:
-        with contextlib.redirect_stdout(io.StringIO()):
+        with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+            warnings.simplefilter("ignore", DeprecationWarning)  # traitlets, inside otter
             otter_assign(str(master), str(result), no_pdfs=True, no_run_tests=True)
     finally:
         otter_logger.setLevel(level)

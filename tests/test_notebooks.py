@@ -1,0 +1,128 @@
+"""Every notebook of the course runs top to bottom; notebooks are committed without outputs.
+
+Parametrized over the globs, so chapters written later are picked up. One kernel per notebook:
+course notebooks are executed here; masters and exercises are executed by their grading run
+(`notebook_runs.graded`), which `test_grading.py` reuses for the scores.
+
+Exercises: the student version has `...` where answers go, so an answer cell, or a later cell
+that uses an answer, may raise. What must not raise: the grading and otter set-up cells, every
+cell before the first answer, and every `grader.check(...)` cell (otter reports failures, it
+never raises, so an error there means broken tests).
+
+Wall times go to `build/notebook_times.md`.
+"""
+
+import shutil
+import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from notebook_runs import answered, graded, record_time, shared_dir
+
+from diffnurbs import _course
+
+COURSE = _course.notebooks(_course.COURSE_DIR)
+SOLUTIONS = _course.notebooks(_course.SOLUTIONS_DIR)
+EXERCISES = _course.notebooks(_course.EXERCISES_DIR)
+DATA = Path(__file__).parent / "data"
+DEMO = [DATA / "solutions" / "99_demo.ipynb", DATA / "exercises" / "99_demo.ipynb"]
+
+
+def _id(path: Path) -> str:
+    return str(path.relative_to(_course.REPO_ROOT))
+
+
+@pytest.mark.parametrize("path", COURSE + SOLUTIONS + EXERCISES + DEMO, ids=_id)
+def test_committed_without_outputs(path):
+    problems = _course.policy_problems(_course.read_notebook(path))
+    assert not problems, f"{_id(path)}: {problems}; run `.venv/bin/python tools/nbclean.py`"
+
+
+@pytest.mark.parametrize("path", COURSE, ids=_id)
+def test_course_notebook_runs_and_draws(path, tmp_path, tmp_path_factory):
+    nb = _course.read_notebook(path)
+    seconds = _course.execute_notebook(nb, tmp_path, timeout=900)
+    record_time(shared_dir(tmp_path_factory), path, seconds, "executed")
+    assert _course.count_figures(nb) >= 1, f"{_id(path)} shows no figure"
+
+
+@pytest.mark.parametrize("path", SOLUTIONS, ids=_id)
+def test_master_runs(path, tmp_path_factory):
+    result = graded(path, path, shared_dir(tmp_path_factory))
+    assert not result.notes, result.notes
+    assert not result.errors, [_describe(e) for e in result.errors]
+
+
+def _describe(error: dict) -> str:
+    return _course.CellError(**{**error, "tags": tuple(error["tags"])}).describe()
+
+
+def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
+    """The errors of an exercise's grading run that are not excused by unfilled answers.
+
+    **Arguments:**
+
+    - `exercise`: the student notebook.
+    - `errors`: `GradeResult.errors` of its grading run (cell 0 is the grading set-up, then the
+      notebook's code cells in order, then one check cell per question).
+
+    **Returns:**
+
+    Descriptions of the errors that should not happen.
+    """
+    code = [c for c in _course.read_notebook(exercise).cells if c.cell_type == "code"]
+    tags = [cell.metadata.get("tags", []) for cell in code]
+    answers = [i for i, cell_tags in enumerate(tags, start=1) if _course.ANSWER_TAG in cell_tags]
+    first_answer = answers[0] if answers else len(code) + 1
+    bad = []
+    for error in errors:
+        index, source = error["index"], error["source"]
+        setup = index == 0 or index > len(code) or "otter.Notebook(" in source
+        check = source.lstrip().startswith("grader.check(")
+        if setup or check or index < first_answer:
+            bad.append(_describe(error))
+    return bad
+
+
+@pytest.mark.parametrize("path", EXERCISES, ids=_id)
+def test_exercise_runs(path, tmp_path_factory):
+    master = _course.SOLUTIONS_DIR / path.name
+    if not master.exists():
+        pytest.fail(f"{_id(path)} has no master {_id(master)}")
+    result = graded(path, master, shared_dir(tmp_path_factory))
+    assert not result.notes, result.notes
+    assert not forbidden_errors(path, result.errors)
+
+
+def test_kernel_is_this_python(tmp_path):
+    nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("import sys; sys.executable")])
+    _course.execute_notebook(nb, tmp_path)
+    assert nb.cells[0].outputs[0]["data"]["text/plain"] == repr(sys.executable)
+
+
+def _check_outputs(nb) -> dict[str, str]:
+    texts = {}
+    for cell in nb.cells:
+        if cell.source.startswith("grader.check("):
+            assert not any(o.output_type == "error" for o in cell.outputs), cell.outputs
+            question = cell.source.split('"')[1]
+            texts[question] = "".join(o.get("data", {}).get("text/plain", "") for o in cell.outputs)
+    return texts
+
+
+def test_demo_exercise_in_student_mode(tmp_path):
+    """`grader.check` reads the public tests from the notebook file, as in a student's session."""
+    (tmp_path / "blank").mkdir()
+    shutil.copyfile(DEMO[1], tmp_path / "blank" / DEMO[1].name)
+    blank = _course.read_notebook(DEMO[1])
+    _course.execute_notebook(blank, tmp_path / "blank", allow_errors=True)
+    assert all("failed" in text for text in _check_outputs(blank).values())
+
+    (tmp_path / "solved").mkdir()
+    solved = answered(DEMO[0], tmp_path)
+    nbformat.write(solved, tmp_path / "solved" / DEMO[1].name)
+    _course.execute_notebook(solved, tmp_path / "solved")
+    texts = _check_outputs(solved)
+    assert set(texts) == {"q1", "q2"}
+    assert all("passed" in text for text in texts.values()), texts

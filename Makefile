@@ -34,6 +34,16 @@ test: install
 bench: install
 	$(BIN)/python bench/run.py
 
+# Executes every course/*.ipynb headless; writes build/html/index.html and one page per chapter.
+html: install
+	$(BIN)/python tools/build_html.py --out build/html
+
+# Student notebooks exercises/NN_topic.ipynb from the masters solutions/NN_topic.ipynb (committed);
+# otter's autograder versions, with the hidden tests, stay in build/otter/ (git-ignored).
+exercises: install
+	$(BIN)/python tools/make_exercises.py --solutions solutions --exercises exercises --build build/otter
+	$(BIN)/python tools/make_exercises.py --solutions tests/data/solutions --exercises tests/data/exercises --build build/otter
+
 lint: install
 	$(BIN)/ruff check src tests bench
 	$(BIN)/ruff format --check src tests bench

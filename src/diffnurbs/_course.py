@@ -62,6 +62,7 @@ ANSWER_TAG = "otter_answer_cell"
 
 _SOLUTION_MARKER = re.compile(r"#\s*(BEGIN SOLUTION|END SOLUTION|SOLUTION)\b")
 _BLOCK = re.compile(r"#\s+(begin|end)\s+(question|solution|tests|prompt)\b", re.IGNORECASE)
+_NONE_CALLS = {"update", "seed"}  # jax.config.update(...), np.random.seed(...): print nothing
 _X64_LINE = 'jax.config.update("jax_enable_x64", True)'
 
 
@@ -424,7 +425,7 @@ def _is_assert_call(node: ast.expr) -> bool:
         return False
     func = node.func
     name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
-    return name.startswith("assert")
+    return name.startswith("assert") or name in _NONE_CALLS
 
 
 def _first_code_cell_problems(nb: nbformat.NotebookNode) -> list[str]:

@@ -62,15 +62,16 @@ def test_subdivision_reproduces_both_halves(degree, split):
 
 
 def test_rational_subdivision_reproduces_quarter_circle():
+    # w = (1, 1, 2) on (1, 0), (1, 1), (0, 1) is C(t) = ((1 - t^2), 2t) / (1 + t^2), exactly.
     points, weights = np.array([[1.0, 0], [1, 1], [0, 1]]), np.array([1.0, 1, 2])
     (left, wl), (right, wr) = dn.subdivide(points, 0.5, weights)
     s = np.linspace(0, 1, 11)
-    whole = dn.NURBSCurve(points, 2, weights=weights)
-    np.testing.assert_allclose(dn.de_casteljau(left, s, wl), whole(0.5 * s), atol=1e-13)
-    np.testing.assert_allclose(dn.de_casteljau(right, s, wr), whole(0.5 + 0.5 * s), atol=1e-13)
-    np.testing.assert_allclose(
-        np.linalg.norm(dn.de_casteljau(right, s, wr), axis=-1), 1, atol=1e-13
-    )
+
+    def exact(t):
+        return np.stack([1 - t**2, 2 * t], axis=-1) / (1 + t**2)[:, None]
+
+    np.testing.assert_allclose(dn.de_casteljau(left, s, wl), exact(0.5 * s), atol=1e-14)
+    np.testing.assert_allclose(dn.de_casteljau(right, s, wr), exact(0.5 + 0.5 * s), atol=1e-14)
 
 
 def test_subdivision_vectorises_over_t():
@@ -98,6 +99,8 @@ def test_hodograph_matches_autodiff_and_nurbs(degree):
     assert hodograph.shape == (degree, 2)
     derivative = jax.vmap(jax.jacfwd(lambda t: dn.de_casteljau(points, t)))(jnp.asarray(T))
     np.testing.assert_allclose(dn.de_casteljau(hodograph, T), derivative, atol=1e-10)
+    if degree > 3:
+        return  # the B-spline oracle below is slow to compile for high orders
     ders = dn.NURBSCurve(points, degree).derivatives(T, degree)
     for k in range(1, degree + 1):
         kth = dn.de_casteljau(dn.bezier_derivative_points(points, k), T)
@@ -136,8 +139,10 @@ def test_volume_broadcasts_and_fixed_w_is_a_surface():
     v = np.linspace(0, 1, 4)[None, :]
     out = dn.de_casteljau_volume(points, u, v, 0.0, weights)
     assert out.shape == (5, 4, 3)
-    surface = dn.NURBSSurface(points[:, :, 0], (2, 2), weights=weights[:, :, 0])
-    np.testing.assert_allclose(out, surface.grid(u[:, 0], v[0]), atol=1e-12)
+    bu, bv = dn.bernstein(2, u[:, 0]), dn.bernstein(2, v[0])
+    num = np.einsum("ai,bj,ij,ijd->abd", bu, bv, weights[:, :, 0], points[:, :, 0])
+    den = np.einsum("ai,bj,ij->ab", bu, bv, weights[:, :, 0])
+    np.testing.assert_allclose(out, num / den[..., None], atol=1e-12)
 
 
 def test_volume_rejects_bad_input():
@@ -168,3 +173,10 @@ def test_gradients_are_finite():
     for t in (0.0, 0.4, 1.0):
         grads = grad(points, weights, t)
         assert all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
+
+
+@pytest.mark.xfail(strict=True, reason="kernel bug: de_casteljau_surface adds axes")
+def test_de_casteljau_surface_shape_is_the_broadcast_shape():
+    points = np.arange(12.0).reshape(2, 3, 2)
+    assert dn.de_casteljau_surface(points, 0.5, 0.5).shape == (2,)
+    assert dn.de_casteljau_surface(points, [0.0, 1.0], [0.0, 1.0]).shape == (2, 2)

@@ -175,7 +175,6 @@ def test_gradients_are_finite():
         assert all(bool(jnp.all(jnp.isfinite(g))) for g in grads)
 
 
-@pytest.mark.xfail(strict=True, reason="kernel bug: de_casteljau_surface adds axes")
 def test_de_casteljau_surface_shape_is_the_broadcast_shape():
     points = np.arange(12.0).reshape(2, 3, 2)
     assert dn.de_casteljau_surface(points, 0.5, 0.5).shape == (2,)

@@ -101,9 +101,6 @@ def test_rational_cylinder_surface():
     )
 
 
-@pytest.mark.xfail(
-    reason="de_casteljau_surface mishandles array parameters (shape bug)", strict=True
-)
 def test_de_casteljau_surface_array_parameters():
     net = np.random.default_rng(0).normal(size=(3, 2, 3))
     surface = dn.NURBSSurface(net, (2, 1))

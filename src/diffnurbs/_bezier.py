@@ -22,9 +22,12 @@ def _homogeneous_net(points, weights, rank, layout):
 
 
 def _casteljau(points: Array, t: Array) -> Array:
-    """Repeated linear interpolation along axis -2 of `points` (seed Listing 1.1)."""
+    """Repeated linear interpolation along axis -2 of `points` (seed Listing 1.1).
+
+    `points` may carry leading batch axes; `t[..., None, None]` broadcasts against them.
+    """
     t = t[..., None, None]
-    q = jnp.broadcast_to(points, t.shape[:-2] + points.shape)
+    q = jnp.broadcast_to(points, jnp.broadcast_shapes(t.shape, points.shape))
     for _ in range(1, points.shape[-2]):
         q = (1.0 - t) * q[..., :-1, :] + t * q[..., 1:, :]
     return q[..., 0, :]

@@ -2,11 +2,11 @@
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs
 from ._knots import clamped_knots
+from ._quadrature import integrate_panels
 from ._rational import from_homogeneous, rational_curve_derivatives, to_homogeneous
 from ._validate import (
     check_control_count,
@@ -20,10 +20,6 @@ from ._validate import (
     concrete,
     float_dtype,
 )
-
-# Gauss-Legendre rule used by `arc_length` on each quarter of every knot span.
-_GAUSS_NODES, _GAUSS_WEIGHTS = np.polynomial.legendre.leggauss(24)
-_SUBDIVISIONS = 4
 
 
 def safe_sqrt(x: Array) -> Array:
@@ -179,8 +175,8 @@ class NURBSCurve(eqx.Module):
     def arc_length(self, a: ArrayLike | None = None, b: ArrayLike | None = None) -> Array:
         """Length of the curve between parameters `a` and `b` (default: the whole domain).
 
-        Gauss-Legendre quadrature (24 nodes) on each quarter of every knot span, so the
-        integrand is smooth on every piece.
+        Adaptive Gauss-Legendre quadrature starting from the knot spans, on which the
+        speed is smooth; panels with a sharp feature are bisected (see `integrate_panels`).
         """
         lower, upper = self.domain
         a = lower if a is None else jnp.asarray(a, dtype=self.knots.dtype)
@@ -189,13 +185,9 @@ class NURBSCurve(eqx.Module):
         ends = concrete(jnp.stack([a, b]))
         if ends is not None and ends[0] > ends[1]:
             raise ValueError(f"arc_length needs a <= b, got a = {ends[0]}, b = {ends[1]}")
-        breaks = jnp.clip(self.knots, a, b)
-        fractions = jnp.linspace(0.0, 1.0, _SUBDIVISIONS + 1, dtype=breaks.dtype)
-        pieces = breaks[:-1, None] + (breaks[1:] - breaks[:-1])[:, None] * fractions
-        lo, hi = pieces[:, :-1].ravel(), pieces[:, 1:].ravel()
-        nodes = jnp.asarray(_GAUSS_NODES, dtype=breaks.dtype)
-        weights = jnp.asarray(_GAUSS_WEIGHTS, dtype=breaks.dtype)
-        half = 0.5 * (hi - lo)
-        u = (lo + hi)[:, None] * 0.5 + half[:, None] * nodes
-        speed = safe_norm(self.derivatives(u, 1)[..., 1, :])
-        return jnp.sum(half * jnp.sum(weights * speed, axis=-1))
+        breaks = jnp.clip(self.knots[self.degree : -self.degree], a, b)
+
+        def speed(u):
+            return safe_norm(self.derivatives(u, 1)[..., 1, :])
+
+        return integrate_panels(speed, breaks[:-1], breaks[1:])

@@ -1,0 +1,134 @@
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import naive_basis, random_knots, sample_parameters
+from scipy.interpolate import BSpline
+
+import diffnurbs as dn
+
+DEGREES = [1, 2, 3, 4, 5]
+
+
+def naive_span(knots, degree, u):
+    """The seed's FindSpan (Listing 1.3) as a linear scan: knots[i] <= u < knots[i + 1]."""
+    n = len(knots) - degree - 2
+    if u >= knots[n + 1]:
+        return n
+    return max(i for i in range(degree, n + 1) if knots[i] <= u)
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+def test_find_span_matches_linear_scan(degree):
+    rng = np.random.default_rng(degree)
+    knots = random_knots(rng, degree + 8, degree)
+    u = sample_parameters(rng, knots, degree)
+    expected = [naive_span(knots, degree, x) for x in u]
+    np.testing.assert_array_equal(dn.find_span(knots, degree, u), expected)
+
+
+def test_last_knot_belongs_to_last_nonempty_span():
+    knots = [0, 0, 0, 0.5, 0.5, 1, 1, 1]
+    assert int(dn.find_span(knots, 2, 1.0)) == 4
+    assert int(dn.find_span(knots, 2, 0.5)) == 4  # a double knot starts the right span
+    assert int(dn.find_span(knots, 2, 0.0)) == 2
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+def test_basis_funs_match_cox_de_boor(degree):
+    rng = np.random.default_rng(10 + degree)
+    knots = random_knots(rng, degree + 7, degree)
+    u = sample_parameters(rng, knots, degree)
+    span, funs = dn.basis_funs(knots, degree, u)
+    assert funs.shape == (*u.shape, degree + 1)
+    full = naive_basis(knots, degree, u)
+    local = np.take_along_axis(full, np.asarray(span)[:, None] - degree + np.arange(degree + 1), 1)
+    np.testing.assert_allclose(funs, local, atol=1e-14)
+    # Outside the span window the recursion gives exact zeros (local support).
+    np.testing.assert_allclose(full.sum(-1), local.sum(-1), atol=1e-14)
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+def test_ders_basis_funs_match_scipy(degree):
+    rng = np.random.default_rng(20 + degree)
+    n_control = degree + 7
+    knots = random_knots(rng, n_control, degree)
+    u = sample_parameters(rng, knots, degree)
+    order = degree + 2
+    span, ders = dn.ders_basis_funs(knots, degree, u, order)
+    assert ders.shape == (*u.shape, order + 1, degree + 1)
+    for r in range(degree + 1):
+        for k in range(order + 1):
+            index = np.asarray(span) - degree + r
+            expected = [
+                BSpline(knots, np.eye(n_control)[i], degree)(x, nu=k) if k <= degree else 0.0
+                for i, x in zip(index, u, strict=True)
+            ]
+            scale = max(1.0, np.abs(expected).max())
+            np.testing.assert_allclose(ders[:, k, r], expected, atol=1e-9 * scale)
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+def test_ders_basis_funs_match_autodiff(degree):
+    rng = np.random.default_rng(30 + degree)
+    knots = random_knots(rng, degree + 6, degree)
+    u = jnp.asarray(rng.uniform(0, 1, size=7))
+
+    def funs(x):
+        return dn.basis_funs(knots, degree, x)[1]
+
+    _, ders = dn.ders_basis_funs(knots, degree, u, 3)
+    derivative = funs
+    for k in range(4):
+        np.testing.assert_allclose(jax.vmap(derivative)(u), ders[:, k], rtol=1e-9, atol=1e-9)
+        derivative = jax.jacfwd(derivative)
+
+
+def test_ders_above_degree_are_exact_zeros():
+    _, ders = dn.ders_basis_funs([0, 0, 0, 0.3, 1, 1, 1], 2, jnp.linspace(0, 1, 9), 5)
+    assert np.all(np.asarray(ders[:, 3:]) == 0.0)
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+def test_cox_de_boor_partition_of_unity_on_closed_domain(degree):
+    rng = np.random.default_rng(40 + degree)
+    knots = random_knots(rng, degree + 6, degree)
+    u = sample_parameters(rng, knots, degree)
+    np.testing.assert_allclose(naive_basis(knots, degree, u).sum(-1), 1.0, atol=1e-14)
+
+
+def test_cox_de_boor_zero_over_zero_is_zero():
+    # N_{0,2} on {0,0,0,1,...}: both recursive terms divide by a zero-length span.
+    knots = [0.0, 0.0, 0.0, 1.0, 1.0, 1.0]
+    u = jnp.linspace(0, 1, 5)
+    np.testing.assert_allclose(dn.cox_de_boor(knots, 2, 0, u), (1 - u) ** 2, atol=1e-15)
+    assert np.all(np.isfinite(jax.vmap(jax.grad(lambda x: dn.cox_de_boor(knots, 2, 0, x)))(u)))
+
+
+@pytest.mark.parametrize("degree", [0, 1, 3, 7])
+def test_bernstein_matches_binomial_formula_and_bezier_basis(degree):
+    t = np.linspace(0, 1, 11)
+    terms = [math.comb(degree, i) * t**i * (1 - t) ** (degree - i) for i in range(degree + 1)]
+    expected = np.stack(terms, -1)
+    np.testing.assert_allclose(dn.bernstein(degree, t), expected, atol=1e-15)
+    if degree >= 1:
+        bezier_knots = [0.0] * (degree + 1) + [1.0] * (degree + 1)
+        np.testing.assert_allclose(naive_basis(bezier_knots, degree, t), expected, atol=1e-14)
+
+
+def test_basis_gradients_with_respect_to_knots_are_finite_at_repeated_knots():
+    knots = jnp.array([0, 0, 0, 0.5, 0.5, 1, 1, 1.0])
+
+    def total(k):
+        return jnp.sum(dn.ders_basis_funs(k, 2, jnp.array([0.0, 0.5, 1.0]), 2)[1] ** 2)
+
+    assert np.all(np.isfinite(jax.grad(total)(knots)))
+
+
+def test_basis_works_in_float32():
+    knots = jnp.array([0, 0, 0, 0.25, 1, 1, 1], dtype=jnp.float32)
+    _span, funs = dn.basis_funs(knots, 2, jnp.linspace(0, 1, 5, dtype=jnp.float32))
+    assert funs.dtype == jnp.float32
+    np.testing.assert_allclose(funs.sum(-1), 1.0, atol=1e-6)

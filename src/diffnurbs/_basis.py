@@ -5,20 +5,25 @@ function is a fixed expression graph of array operations: `jit`, `vmap` and `gra
 (with respect to the knots as well as the parameter) work on all of them.
 """
 
+import functools
 import math
 
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, Int
 
 from ._validate import check_degree, check_order
 
 
+@functools.partial(jax.jit, static_argnums=1)
 def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
     """Index `i` of the knot span `[knots[i], knots[i + 1])` that holds `u`.
 
-    The search is a vectorised binary search (`jnp.searchsorted`), clipped into
-    `[degree, n]` with `n = len(knots) - degree - 2`: the last knot belongs to the last
-    non-empty span, and parameters outside the domain fall into the first or last span.
+    The largest `i` in `[degree, n]` with `knots[i] <= u`, where `n = len(knots) - degree - 2`:
+    the last knot belongs to the last non-empty span, a repeated knot starts the span to
+    its right, and parameters outside the domain fall into the first or last span. The
+    search is a binary search written as a loop (a bisection per bit of the index), which
+    XLA keeps as one pass over `u`.
 
     **Arguments:**
 
@@ -30,10 +35,16 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
 
     Integer array of the shape of `u`.
     """
-    knots = jnp.asarray(knots)
+    knots, u = jnp.asarray(knots), jnp.asarray(u)
     last = knots.shape[0] - degree - 2
-    span = jnp.searchsorted(knots, jnp.asarray(u), side="right") - 1
-    return jnp.clip(span, degree, last)
+    steps = max(last - degree, 0).bit_length()
+
+    def bisect(i, span):
+        candidate = span + jnp.left_shift(1, steps - 1 - i)
+        inside = (candidate <= last) & (knots[jnp.minimum(candidate, last)] <= u)
+        return jnp.where(inside, candidate, span)
+
+    return jax.lax.fori_loop(0, steps, bisect, jnp.full(u.shape, degree, dtype=jnp.int32))
 
 
 def _safe_divide(num, den):
@@ -50,6 +61,7 @@ def _local_knots(knots, degree, span, u):
     return left, right
 
 
+@functools.partial(jax.jit, static_argnums=1)
 def basis_funs(
     knots: ArrayLike, degree: int, u: ArrayLike
 ) -> tuple[Int[Array, "..."], Float[Array, "... p+1"]]:
@@ -123,6 +135,7 @@ def _derivative_row(ndu, degree, r, order):
     return row
 
 
+@functools.partial(jax.jit, static_argnums=(1, 3))
 def ders_basis_funs(
     knots: ArrayLike, degree: int, u: ArrayLike, n: int
 ) -> tuple[Int[Array, "..."], Float[Array, "... n+1 p+1"]]:
@@ -197,6 +210,7 @@ def cox_de_boor(knots: ArrayLike, degree: int, i: int, u: ArrayLike) -> Float[Ar
     )
 
 
+@functools.partial(jax.jit, static_argnums=0)
 def bernstein(degree: int, t: ArrayLike) -> Float[Array, "... n+1"]:
     """All Bernstein polynomials `B_{i,n}(t) = C(n, i) t^i (1 - t)^(n - i)`.
 

@@ -1,10 +1,12 @@
 """NURBS curves: evaluation, derivatives and differential geometry."""
 
+import math
+
 import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._basis import basis_funs, ders_basis_funs
+from ._basis import basis_funs, ders_basis_funs, find_span
 from ._knots import clamped_knots
 from ._quadrature import integrate_panels
 from ._rational import from_homogeneous, rational_curve_derivatives, to_homogeneous
@@ -48,6 +50,26 @@ def clamp_to_domain(u: Array, lower: Array, upper: Array) -> Array:
 def local_indices(span: Array, degree: int) -> Array:
     """Indices `span - p, ..., span` of the control points that act on a span."""
     return span[..., None] - degree + jnp.arange(degree + 1)
+
+
+def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array:
+    """`sum_r funs[..., r] P[span - p + r]`: the `p + 1` non-zero terms of a B-spline sum.
+
+    `funs` has shape `span.shape + extra + (p + 1,)` (e.g. one row per derivative order);
+    the result has shape `span.shape + extra + (dim,)`. One gathered row of points per
+    term keeps the working set at `(..., dim)` instead of `(..., p + 1, dim)`.
+    """
+    extra = (1,) * (funs.ndim - span.ndim - 1)
+    total = 0.0
+    for r in range(degree + 1):
+        row = points[span - degree + r]
+        total = total + funs[..., r, None] * row.reshape(span.shape + extra + row.shape[-1:])
+    return total
+
+
+# Evaluate points from per-span Taylor coefficients once there are this many parameters per
+# span: building the table costs about as much as evaluating this many points directly.
+_TABLE_POINTS_PER_SPAN = 32
 
 
 class NURBSCurve(eqx.Module):
@@ -114,18 +136,48 @@ class NURBSCurve(eqx.Module):
         return to_homogeneous(self.control_points, self.weights)
 
     def _parameters(self, u: ArrayLike) -> Array:
+        """Parameters as an array; concrete ones outside the domain raise `ValueError`."""
         u = jnp.asarray(u, dtype=self.knots.dtype)
-        lower, upper = self.domain
-        check_parameter(u, lower, upper)
-        return clamp_to_domain(u, lower, upper)
+        check_parameter(u, *self.domain)
+        return u
+
+    def _clamp(self, u: Array) -> Array:
+        return clamp_to_domain(u, *self.domain)
 
     def __call__(self, u: ArrayLike) -> Float[Array, "... dim"]:
         """Points `C(u)` for parameters of any shape; returns `u.shape + (dim,)`."""
-        u = self._parameters(u)
-        span, funs = basis_funs(self.knots, self.degree, u)
-        local = self.homogeneous_points()[local_indices(span, self.degree)]
-        points = jnp.einsum("...r,...rd->...d", funs, local)
+        return self._points(self._parameters(u))
+
+    @eqx.filter_jit
+    def _points(self, u: Array) -> Array:
+        u = self._clamp(u)
+        n_spans = self.knots.shape[0] - 2 * self.degree - 1
+        if u.size >= _TABLE_POINTS_PER_SPAN * n_spans:
+            points = self._horner(u)
+        else:
+            span, funs = basis_funs(self.knots, self.degree, u)
+            points = combine_local(funs, self.homogeneous_points(), span, self.degree)
         return from_homogeneous(points) if self.rational else points
+
+    def _horner(self, u: Array) -> Array:
+        """Homogeneous points by Horner's rule on each span's Taylor coefficients.
+
+        On span `i` the curve is the polynomial `sum_k C^(k)(u_i) (u - u_i)^k / k!`; the
+        coefficients come from CurveDerivs at the span starts (one call for all spans),
+        so every point costs a span search and `p` multiply-adds, with no division.
+        """
+        p = self.degree
+        starts = self.knots[p : -p - 1]
+        span_of_start, ders = ders_basis_funs(self.knots, p, starts, p)
+        factorials = jnp.asarray([math.factorial(k) for k in range(p + 1)], dtype=u.dtype)
+        table = combine_local(ders, self.homogeneous_points(), span_of_start, p)
+        table = table / factorials[:, None]
+        span = find_span(self.knots, p, u)
+        row, t = span - p, (u - self.knots[span])[..., None]
+        points = table[row, p]
+        for k in range(p - 1, -1, -1):
+            points = points * t + table[row, k]
+        return points
 
     def derivatives(self, u: ArrayLike, order: int) -> Float[Array, "... order+1 dim"]:
         """`C(u), C'(u), ..., C^(order)(u)`: CurveDerivs, then the Leibniz rule if rational.
@@ -139,11 +191,12 @@ class NURBSCurve(eqx.Module):
 
         Array of shape `u.shape + (order + 1, dim)`.
         """
-        order = check_order(order)
-        u = self._parameters(u)
-        span, ders = ders_basis_funs(self.knots, self.degree, u, order)
-        local = self.homogeneous_points()[local_indices(span, self.degree)]
-        homogeneous = jnp.einsum("...kr,...rd->...kd", ders, local)
+        return self._derivatives(self._parameters(u), check_order(order))
+
+    @eqx.filter_jit
+    def _derivatives(self, u: Array, order: int) -> Array:
+        span, ders = ders_basis_funs(self.knots, self.degree, self._clamp(u), order)
+        homogeneous = combine_local(ders, self.homogeneous_points(), span, self.degree)
         if not self.rational:
             return homogeneous
         return rational_curve_derivatives(homogeneous[..., :-1], homogeneous[..., -1])
@@ -185,9 +238,13 @@ class NURBSCurve(eqx.Module):
         ends = concrete(jnp.stack([a, b]))
         if ends is not None and ends[0] > ends[1]:
             raise ValueError(f"arc_length needs a <= b, got a = {ends[0]}, b = {ends[1]}")
+        return self._length(a, b)
+
+    @eqx.filter_jit
+    def _length(self, a: Array, b: Array) -> Array:
         breaks = jnp.clip(self.knots[self.degree : -self.degree], a, b)
 
         def speed(u):
-            return safe_norm(self.derivatives(u, 1)[..., 1, :])
+            return safe_norm(self._derivatives(u, 1)[..., 1, :])
 
         return integrate_panels(speed, breaks[:-1], breaks[1:])

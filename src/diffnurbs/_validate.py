@@ -89,11 +89,11 @@ def check_knots(knots, n_control, degree, name="knots"):
             f"{name} must be non-decreasing, got {name}[{i + 1}] = {values[i + 1]} < "
             f"{name}[{i}] = {values[i]}"
         )
-    _, counts = np.unique(values[1:-1], return_counts=True)
-    if counts.size and counts.max() > degree + 1:
+    distinct, counts = np.unique(values, return_counts=True)
+    if counts.max() > degree + 1:
         raise ValueError(
-            f"interior {name} may repeat at most degree + 1 = {degree + 1} times, got "
-            f"{counts.max()}"
+            f"a knot may repeat at most degree + 1 = {degree + 1} times, got {name} value "
+            f"{distinct[counts.argmax()]} {counts.max()} times"
         )
     if not values[degree] < values[n_control]:
         raise ValueError(

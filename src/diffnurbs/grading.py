@@ -22,7 +22,9 @@ How a submission is run:
    the questions checked so far keep their marks.
 
 Submissions run with the grader's privileges: grade untrusted work in a throwaway account or
-container.
+container. As with `otter run`, the tests run inside the submission's own kernel, so a
+submission written to attack the grader could forge its results: read the code of suspicious
+scores (`--report` lists every cell error and test result).
 """
 
 from __future__ import annotations
@@ -475,7 +477,12 @@ def _peek(path: Path) -> nbformat.NotebookNode | None:
 def _grade_one(path: Path, label: str, master: Master | None, timeout: float) -> GradeResult:
     if master is None:
         return GradeResult(label, None, notes=["no master in the solutions folder matches it"])
-    result = grade_notebook(path, master, timeout=timeout, label=label)
+    try:
+        result = grade_notebook(path, master, timeout=timeout, label=label)
+    except Exception as error:  # the grader's own failure: report it, grade the rest
+        result = GradeResult(label, master.name, dict.fromkeys(master.questions, 0.0))
+        result.possible = dict(master.possible)
+        result.notes.append(f"grading failed: {type(error).__name__}: {error}")
     result.executed = None
     return result
 

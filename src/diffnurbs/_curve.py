@@ -56,14 +56,15 @@ def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array
     """`sum_r funs[..., r] P[span - p + r]`: the `p + 1` non-zero terms of a B-spline sum.
 
     `funs` has shape `span.shape + extra + (p + 1,)` (e.g. one row per derivative order);
-    the result has shape `span.shape + extra + (dim,)`. One gathered row of points per
+    the result has shape `span.shape + extra + points.shape[1:]`. One gathered row of points per
     term keeps the working set at `(..., dim)` instead of `(..., p + 1, dim)`.
     """
     extra = (1,) * (funs.ndim - span.ndim - 1)
+    item = points.shape[1:]  # (dim,) for a curve, (nv, dim) for the rows of a surface net
     total = 0.0
     for r in range(degree + 1):
-        row = points[span - degree + r]
-        total = total + funs[..., r, None] * row.reshape(span.shape + extra + row.shape[-1:])
+        row = points[span - degree + r].reshape(span.shape + extra + item)
+        total = total + funs[..., r].reshape(funs.shape[:-1] + (1,) * len(item)) * row
     return total
 
 

@@ -5,7 +5,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs
-from ._curve import clamp_to_domain, local_indices, safe_normalize
+from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
 from ._knots import clamped_knots
 from ._rational import from_homogeneous, rational_surface_derivatives, to_homogeneous
 from ._validate import (
@@ -19,6 +19,17 @@ from ._validate import (
     check_weights,
     float_dtype,
 )
+
+# Above this many control points in a direction, a dense basis matrix wastes more work on
+# zeros than the matrix product saves over the banded gathers.
+_DENSE_GRID_LIMIT = 64
+
+
+def dense_basis(span: Array, funs: Array, degree: int, n_control: int) -> Array:
+    """All basis functions as a `(len(span), n_control)` matrix, zeros off the band."""
+    first = (span - degree)[:, None]
+    column = jnp.arange(n_control)
+    return sum(funs[:, r, None] * (column == first + r) for r in range(degree + 1))
 
 
 def _pair(value, name):
@@ -107,11 +118,16 @@ class NURBSSurface(eqx.Module):
         return to_homogeneous(self.control_points, self.weights)
 
     def _parameters(self, u, v):
+        """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""
         (u0, u1), (v0, v1) = self.domain
         u = jnp.asarray(u, dtype=self.knots_u.dtype)
         v = jnp.asarray(v, dtype=self.knots_u.dtype)
         check_parameter(u, u0, u1, "u")
         check_parameter(v, v0, v1, "v")
+        return u, v
+
+    def _clamp(self, u, v):
+        (u0, u1), (v0, v1) = self.domain
         return clamp_to_domain(u, u0, u1), clamp_to_domain(v, v0, v1)
 
     def _local_net(self, span_u, span_v):
@@ -123,7 +139,11 @@ class NURBSSurface(eqx.Module):
 
     def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... dim"]:
         """Points `S(u, v)`; `u` and `v` broadcast against each other."""
-        u, v = jnp.broadcast_arrays(*self._parameters(u, v))
+        return self._points(*self._parameters(u, v))
+
+    @eqx.filter_jit
+    def _points(self, u: Array, v: Array) -> Array:
+        u, v = jnp.broadcast_arrays(*self._clamp(u, v))
         span_u, funs_u = basis_funs(self.knots_u, self.degree[0], u)
         span_v, funs_v = basis_funs(self.knots_v, self.degree[1], v)
         net = self._local_net(span_u, span_v)
@@ -133,20 +153,30 @@ class NURBSSurface(eqx.Module):
     def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
         """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`.
 
-        Contracts one direction at a time, so the cost is `O(mu (p + 1) nv + mu mv (q + 1))`
-        instead of `O(mu mv (p + 1)(q + 1))` for scattered evaluation.
+        Contracts one direction at a time, with basis matrices `(len(us), nu)` and
+        `(len(vs), nv)`: two matrix products when the net is small, and the banded
+        `p + 1` non-zeros per row (gathers) when it is large.
         """
         us, vs = self._parameters(us, vs)
         check_rank(us, 1, "us", "(a 1-D array of u values)")
         check_rank(vs, 1, "vs", "(a 1-D array of v values)")
-        p, q = self.degree
+        return self._grid(us, vs)
+
+    @eqx.filter_jit
+    def _grid(self, us: Array, vs: Array) -> Array:
+        us, vs = self._clamp(us, vs)
+        (p, q), points = self.degree, self.homogeneous_points()
         span_u, funs_u = basis_funs(self.knots_u, p, us)
         span_v, funs_v = basis_funs(self.knots_v, q, vs)
-        rows = self.homogeneous_points()[local_indices(span_u, p)]  # (mu, p+1, nv, D)
-        curves = jnp.einsum("ia,iajd->ijd", funs_u, rows)  # (mu, nv, D)
-        cols = curves[:, local_indices(span_v, q)]  # (mu, mv, q+1, D)
-        points = jnp.einsum("jb,ijbd->ijd", funs_v, cols)
-        return from_homogeneous(points) if self.rational else points
+        if max(points.shape[:2]) <= _DENSE_GRID_LIMIT:
+            basis_u = dense_basis(span_u, funs_u, p, points.shape[0])
+            basis_v = dense_basis(span_v, funs_v, q, points.shape[1])
+            grid = jnp.einsum("ia,abd,jb->ijd", basis_u, points, basis_v)
+        else:
+            curves = combine_local(funs_u, points, span_u, p)  # (mu, nv, D)
+            cols = curves[:, local_indices(span_v, q)]  # (mu, mv, q + 1, D)
+            grid = jnp.einsum("jb,ijbd->ijd", funs_v, cols)
+        return from_homogeneous(grid) if self.rational else grid
 
     def derivatives(self, u: ArrayLike, v: ArrayLike, order: int) -> Float[Array, "... k l dim"]:
         """All partial derivatives `d^(k+l) S / du^k dv^l` for `0 <= k, l <= order`.
@@ -158,8 +188,11 @@ class NURBSSurface(eqx.Module):
 
         Array of shape `broadcast(u, v).shape + (order + 1, order + 1, dim)`.
         """
-        order = check_order(order)
-        u, v = jnp.broadcast_arrays(*self._parameters(u, v))
+        return self._derivatives(*self._parameters(u, v), check_order(order))
+
+    @eqx.filter_jit
+    def _derivatives(self, u: Array, v: Array, order: int) -> Array:
+        u, v = jnp.broadcast_arrays(*self._clamp(u, v))
         span_u, ders_u = ders_basis_funs(self.knots_u, self.degree[0], u, order)
         span_v, ders_v = ders_basis_funs(self.knots_v, self.degree[1], v, order)
         net = self._local_net(span_u, span_v)
@@ -169,8 +202,17 @@ class NURBSSurface(eqx.Module):
         return rational_surface_derivatives(homogeneous[..., :-1], homogeneous[..., -1])
 
     def normal(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... 3"]:
-        """Unit normal `S_u x S_v / |S_u x S_v|` of a surface in 3D; zero where degenerate."""
+        """Unit normal `S_u x S_v / |S_u x S_v|` of a surface in 3D.
+
+        Zero where the surface is degenerate (a pole, a collapsed edge): there
+        `|S_u x S_v|` is rounding noise, below `64 eps (|S_u|^2 + |S_v|^2)`.
+        """
         if self.dim != 3:
             raise ValueError(f"normal needs a surface in 3D, got dim = {self.dim}")
         ders = self.derivatives(u, v, 1)
-        return safe_normalize(jnp.cross(ders[..., 1, 0, :], ders[..., 0, 1, :]))
+        s_u, s_v = ders[..., 1, 0, :], ders[..., 0, 1, :]
+        cross = jnp.cross(s_u, s_v)
+        scale = jnp.sum(s_u * s_u, -1) + jnp.sum(s_v * s_v, -1)
+        noise = 64 * jnp.finfo(cross.dtype).eps * scale
+        degenerate = (safe_norm(cross) <= noise)[..., None]
+        return jnp.where(degenerate, 0.0, safe_normalize(cross))

@@ -90,3 +90,11 @@ def test_master_checker_reports_broken_rules(tmp_path):
     assert "solution cell needs" in problems
     assert "needs at least one hidden test" in problems
     assert "bare expression" in problems
+
+
+def test_printing_test_statements_are_reported():
+    """doctest echoes expression statements in loops too; calls expected to raise are fine."""
+    source = "for n in (1, 2):\n    f(n)\ntry:\n    g()\nexcept ValueError:\n    pass\nh()\n"
+    problems = _course._test_problems(source, "test")
+    assert [p.split(" is ")[0] for p in problems] == ["test: line 2", "test: line 7"]
+    assert not _course._test_problems("assert f(1)\nnp.testing.assert_allclose(a, b)\n", "test")

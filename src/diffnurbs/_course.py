@@ -410,14 +410,30 @@ def _test_problems(source: str, where: str) -> list[str]:
         tree = ast.parse(source)
     except SyntaxError as error:
         return [f"{where}: syntax error: {error.msg}"]
-    problems = []
-    for statement in tree.body:
-        if isinstance(statement, ast.Expr) and not _is_assert_call(statement.value):
-            problems.append(
-                f"{where}: line {statement.lineno} is a bare expression; OK-format tests compare "
-                "printed output, so write `assert ...` instead"
-            )
-    return problems
+    return [
+        f"{where}: line {node.lineno} is a bare expression; OK-format tests compare printed "
+        "output (also inside loops), so write `assert ...` or `_ = ...` instead"
+        for node in _echoed_expressions(tree.body)
+        if not _is_assert_call(node.value)
+    ]
+
+
+def _echoed_expressions(statements: list[ast.stmt]) -> list[ast.Expr]:
+    """Expression statements doctest would print: at top level or in loops, ifs and withs.
+
+    A `try` body is skipped: a call there is expected to raise (`pytest.raises` style)."""
+    found = []
+    for statement in statements:
+        if isinstance(statement, ast.Expr):
+            found.append(statement)
+        elif not isinstance(statement, ast.FunctionDef | ast.AsyncFunctionDef | ast.ClassDef):
+            is_try = isinstance(statement, ast.Try)
+            names = ("orelse", "finalbody") if is_try else ("body", "orelse")
+            for name in names:
+                found += _echoed_expressions(getattr(statement, name, []))
+            for handler in getattr(statement, "handlers", []):
+                found += _echoed_expressions(handler.body)
+    return found
 
 
 def _is_assert_call(node: ast.expr) -> bool:

@@ -305,8 +305,6 @@ def assign(master: Path, result: Path) -> Assigned:
 
     The paths of the two generated notebooks.
     """
-    from otter.assign import main as otter_assign
-
     master, result = Path(master).resolve(), Path(result).resolve()
     otter_logger = logging.getLogger("otter")
     level = otter_logger.level
@@ -314,6 +312,8 @@ def assign(master: Path, result: Path) -> Assigned:
     try:
         with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
             warnings.simplefilter("ignore", DeprecationWarning)  # traitlets, inside otter
+            from otter.assign import main as otter_assign
+
             otter_assign(str(master), str(result), no_pdfs=True, no_run_tests=True)
     finally:
         otter_logger.setLevel(level)

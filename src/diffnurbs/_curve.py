@@ -154,18 +154,23 @@ class NURBSCurve(eqx.Module):
         u = self._clamp(u)
         n_spans = self.knots.shape[0] - 2 * self.degree - 1
         if u.size >= _TABLE_POINTS_PER_SPAN * n_spans:
-            points = self._horner(u)
-        else:
-            span, funs = basis_funs(self.knots, self.degree, u)
-            points = combine_local(funs, self.homogeneous_points(), span, self.degree)
+            columns = self._horner_columns(u)
+            if self.rational:
+                columns = [column / columns[-1] for column in columns[:-1]]
+            return jnp.stack(columns, axis=-1)
+        span, funs = basis_funs(self.knots, self.degree, u)
+        points = combine_local(funs, self.homogeneous_points(), span, self.degree)
         return from_homogeneous(points) if self.rational else points
 
-    def _horner(self, u: Array) -> Array:
-        """Homogeneous points by Horner's rule on each span's Taylor coefficients.
+    def _horner_columns(self, u: Array) -> list[Array]:
+        """Homogeneous coordinates, one array each, by Horner's rule on Taylor coefficients.
 
         On span `i` the curve is the polynomial `sum_k C^(k)(u_i) (u - u_i)^k / k!`; the
         coefficients come from CurveDerivs at the span starts (one call for all spans),
         so every point costs a span search and `p` multiply-adds, with no division.
+        Coordinates are kept as separate arrays because XLA fuses each output element
+        with everything it depends on: a stacked `(..., dim)` result would redo the
+        span search and the other coordinates' work for every coordinate.
         """
         p = self.degree
         starts = self.knots[p : -p - 1]
@@ -174,11 +179,14 @@ class NURBSCurve(eqx.Module):
         table = combine_local(ders, self.homogeneous_points(), span_of_start, p)
         table = table / factorials[:, None]
         span = find_span(self.knots, p, u)
-        row, t = span - p, (u - self.knots[span])[..., None]
-        points = table[row, p]
-        for k in range(p - 1, -1, -1):
-            points = points * t + table[row, k]
-        return points
+        row, t = span - p, u - self.knots[span]
+        columns = []
+        for d in range(table.shape[-1]):
+            value = table[:, p, d][row]
+            for k in range(p - 1, -1, -1):
+                value = value * t + table[:, k, d][row]
+            columns.append(value)
+        return columns
 
     def derivatives(self, u: ArrayLike, order: int) -> Float[Array, "... order+1 dim"]:
         """`C(u), C'(u), ..., C^(order)(u)`: CurveDerivs, then the Leibniz rule if rational.

@@ -144,11 +144,23 @@ class NURBSSurface(eqx.Module):
     @eqx.filter_jit
     def _points(self, u: Array, v: Array) -> Array:
         u, v = jnp.broadcast_arrays(*self._clamp(u, v))
-        span_u, funs_u = basis_funs(self.knots_u, self.degree[0], u)
-        span_v, funs_v = basis_funs(self.knots_v, self.degree[1], v)
-        net = self._local_net(span_u, span_v)
-        points = jnp.einsum("...a,...b,...abd->...d", funs_u, funs_v, net)
-        return from_homogeneous(points) if self.rational else points
+        (p, q), points = self.degree, self.homogeneous_points()
+        span_u, funs_u = basis_funs(self.knots_u, p, u)
+        span_v, funs_v = basis_funs(self.knots_v, q, v)
+        nv = points.shape[1]
+        first = (span_u - p) * nv + (span_v - q)  # flat index of the first active point
+        # One array per coordinate, summed term by term: XLA then fuses each coordinate
+        # into one pass without materialising the (..., p + 1, q + 1, dim) local nets.
+        columns = []
+        for coordinate in points.reshape(-1, points.shape[2]).T:
+            total = 0.0
+            for a in range(p + 1):
+                row = sum(funs_v[..., b] * coordinate[first + a * nv + b] for b in range(q + 1))
+                total = total + funs_u[..., a] * row
+            columns.append(total)
+        if self.rational:
+            columns = [column / columns[-1] for column in columns[:-1]]
+        return jnp.stack(columns, axis=-1)
 
     def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
         """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`.

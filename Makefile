@@ -25,7 +25,7 @@ system-libs:
 	else echo "warning: install $(SYSTEM_LIBS) (apt) for pyvista's 3D figures"; fi
 
 lab: install
-	PYVISTA_OFF_SCREEN=false $(BIN)/jupyter lab course/
+	PYVISTA_OFF_SCREEN=false $(BIN)/jupyter lab --ServerApp.root_dir=. course/00_index.ipynb
 
 test: install
 	$(BIN)/ruff check src tests bench

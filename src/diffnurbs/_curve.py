@@ -9,7 +9,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ._basis import basis_funs, ders_basis_funs, find_span
 from ._knots import clamped_knots
 from ._quadrature import integrate_panels
-from ._rational import from_homogeneous, rational_curve_derivatives, to_homogeneous
+from ._rational import AbstractRationalSpline, from_homogeneous, rational_curve_derivatives
 from ._validate import (
     check_control_count,
     check_degree,
@@ -73,7 +73,7 @@ def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array
 _TABLE_POINTS_PER_SPAN = 32
 
 
-class NURBSCurve(eqx.Module):
+class NURBSCurve(AbstractRationalSpline):
     """A (rational) B-spline curve `C(u) = sum_i N_{i,p}(u) w_i P_i / sum_i N_{i,p}(u) w_i`.
 
     Bezier curves are the special case of `degree = len(control_points) - 1` with the
@@ -118,23 +118,9 @@ class NURBSCurve(eqx.Module):
         self.weights = weights
 
     @property
-    def rational(self) -> bool:
-        return self.weights is not None
-
-    @property
-    def dim(self) -> int:
-        return self.control_points.shape[1]
-
-    @property
     def domain(self) -> tuple[Array, Array]:
         """`(knots[p], knots[n + 1])`, the parameter interval."""
         return self.knots[self.degree], self.knots[-self.degree - 1]
-
-    def homogeneous_points(self) -> Float[Array, "n dim+1"]:
-        """Control points as `(w P, w)`; the plain points when the curve is not rational."""
-        if self.weights is None:
-            return self.control_points
-        return to_homogeneous(self.control_points, self.weights)
 
     def _parameters(self, u: ArrayLike) -> Array:
         """Parameters as an array; concrete ones outside the domain raise `ValueError`."""

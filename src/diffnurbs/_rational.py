@@ -7,6 +7,7 @@ NURBS Book A4.2 and A4.4) without differentiating a quotient.
 
 import math
 
+import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -94,3 +95,26 @@ def rational_surface_derivatives(
                     v = v - coeff * w_ders[..., i, j, None] * skl[k - i][l - j]
             skl[k][l] = v / w_ders[..., 0, 0, None]
     return jnp.stack([jnp.stack(row, axis=-2) for row in skl], axis=-3)
+
+
+class AbstractRationalSpline(eqx.Module):
+    """What curves and surfaces share: control points, optional weights, homogeneous form."""
+
+    control_points: eqx.AbstractVar[Array]
+    weights: eqx.AbstractVar[Array | None]
+
+    @property
+    def rational(self) -> bool:
+        """True when the spline has weights (None means a non-rational B-spline)."""
+        return self.weights is not None
+
+    @property
+    def dim(self) -> int:
+        """Dimension of the space the control points live in."""
+        return self.control_points.shape[-1]
+
+    def homogeneous_points(self) -> Array:
+        """Control points as `(w P, w)`; the plain points when the spline is not rational."""
+        if self.weights is None:
+            return self.control_points
+        return to_homogeneous(self.control_points, self.weights)

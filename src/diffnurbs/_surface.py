@@ -7,7 +7,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ._basis import basis_funs, ders_basis_funs
 from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
 from ._knots import clamped_knots
-from ._rational import from_homogeneous, rational_surface_derivatives, to_homogeneous
+from ._rational import AbstractRationalSpline, from_homogeneous, rational_surface_derivatives
 from ._validate import (
     check_control_count,
     check_degree,
@@ -38,7 +38,7 @@ def _pair(value, name):
     return tuple(value)
 
 
-class NURBSSurface(eqx.Module):
+class NURBSSurface(AbstractRationalSpline):
     """A (rational) tensor-product B-spline surface
 
     `S(u, v) = sum_ij N_{i,p}(u) N_{j,q}(v) w_ij P_ij / sum_ij N_{i,p}(u) N_{j,q}(v) w_ij`.
@@ -98,24 +98,10 @@ class NURBSSurface(eqx.Module):
         return self.knots_u, self.knots_v
 
     @property
-    def rational(self) -> bool:
-        return self.weights is not None
-
-    @property
-    def dim(self) -> int:
-        return self.control_points.shape[2]
-
-    @property
     def domain(self) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
         """`((u_min, u_max), (v_min, v_max))`."""
         p, q = self.degree
         return (self.knots_u[p], self.knots_u[-p - 1]), (self.knots_v[q], self.knots_v[-q - 1])
-
-    def homogeneous_points(self) -> Float[Array, "nu nv dim+1"]:
-        """Control points as `(w P, w)`; the plain points when the surface is not rational."""
-        if self.weights is None:
-            return self.control_points
-        return to_homogeneous(self.control_points, self.weights)
 
     def _parameters(self, u, v):
         """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""

@@ -41,7 +41,8 @@ def de_casteljau(
     **Arguments:**
 
     - `control_points`: array of shape `(n + 1, dim)`.
-    - `t`: parameters in [0, 1], any shape.
+    - `t`: parameters, any shape; [0, 1] is the curve, values outside extend the same
+      polynomial (used to draw a conic beyond its arc), unlike `NURBSCurve`, which raises.
     - `weights`: optional positive weights, shape `(n + 1,)`; the curve is then rational
       and the algorithm runs on homogeneous points.
 

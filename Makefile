@@ -25,7 +25,8 @@ system-libs:
 	else echo "warning: install $(SYSTEM_LIBS) (apt) for pyvista's 3D figures"; fi
 
 lab: install
-	PYVISTA_OFF_SCREEN=false $(BIN)/jupyter lab --ServerApp.root_dir=. course/00_index.ipynb
+	PYVISTA_OFF_SCREEN=false $(BIN)/jupyter lab --ServerApp.root_dir=. \
+		$$([ "$$(id -u)" = 0 ] && echo --allow-root) course/00_index.ipynb
 
 test: install
 	$(BIN)/ruff check src tests bench

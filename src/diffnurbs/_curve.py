@@ -7,6 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs, find_span
+from ._knotops import bezier_knots, bezier_segments, check_insertion, insert, span_breaks
 from ._knots import clamped_knots
 from ._quadrature import integrate_panels
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_curve_derivatives
@@ -121,6 +122,39 @@ class NURBSCurve(AbstractRationalSpline):
     def domain(self) -> tuple[Array, Array]:
         """`(knots[p], knots[n + 1])`, the parameter interval."""
         return self.knots[self.degree], self.knots[-self.degree - 1]
+
+    def _from_homogeneous_points(self, points: Array, knots: Array) -> "NURBSCurve":
+        """A curve of the same degree and kind from homogeneous control points."""
+        if not self.rational:
+            return NURBSCurve(points, self.degree, knots)
+        return NURBSCurve(from_homogeneous(points), self.degree, knots, points[:, -1])
+
+    def insert_knot(self, u: ArrayLike, times: int = 1) -> "NURBSCurve":
+        """The same curve with the knot `u` inserted `times` times (Boehm, NURBS Book A5.1).
+
+        The knot may end with multiplicity at most the degree. Works with a traced `u`
+        (checks then skipped), so it can sit inside a loss function.
+        """
+        times = check_insertion(self.knots, self.degree, u, times)
+        u = jnp.asarray(u, dtype=self.knots.dtype)
+        points, knots = insert(self.homogeneous_points(), self.knots, self.degree, [u] * times)
+        return self._from_homogeneous_points(points, knots)
+
+    def refine(self, values: ArrayLike) -> "NURBSCurve":
+        """The same curve with every knot of `values` inserted (knot refinement)."""
+        curve = self
+        for u in jnp.asarray(values, dtype=self.knots.dtype).ravel():
+            curve = curve.insert_knot(u)
+        return curve
+
+    def decompose(self) -> list["NURBSCurve"]:
+        """The Bezier pieces of the curve, one per non-empty knot span (clamped, concrete knots)."""
+        pieces = bezier_segments(self.homogeneous_points(), self.knots, self.degree)
+        breaks = span_breaks(self.knots, self.degree)
+        return [
+            self._from_homogeneous_points(piece, bezier_knots(a, b, self.degree, self.knots.dtype))
+            for piece, a, b in zip(pieces, breaks[:-1], breaks[1:], strict=True)
+        ]
 
     def _parameters(self, u: ArrayLike) -> Array:
         """Parameters as an array; concrete ones outside the domain raise `ValueError`."""

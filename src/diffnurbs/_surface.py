@@ -6,6 +6,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs
 from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
+from ._knotops import bezier_knots, bezier_segments, check_insertion, insert, span_breaks
 from ._knots import clamped_knots
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_surface_derivatives
 from ._validate import (
@@ -102,6 +103,50 @@ class NURBSSurface(AbstractRationalSpline):
         """`((u_min, u_max), (v_min, v_max))`."""
         p, q = self.degree
         return (self.knots_u[p], self.knots_u[-p - 1]), (self.knots_v[q], self.knots_v[-q - 1])
+
+    def _from_homogeneous_points(self, points, knots_u, knots_v) -> "NURBSSurface":
+        """A surface of the same degrees and kind from homogeneous control points."""
+        if not self.rational:
+            return NURBSSurface(points, self.degree, (knots_u, knots_v))
+        weights = points[..., -1]
+        return NURBSSurface(from_homogeneous(points), self.degree, (knots_u, knots_v), weights)
+
+    def insert_knot(self, value: ArrayLike, direction: str = "u", times: int = 1) -> "NURBSSurface":
+        """The same surface with a knot inserted `times` times along `direction` ("u" or "v").
+
+        Boehm's algorithm (NURBS Book A5.3) on every row or column of the net.
+        """
+        if direction not in ("u", "v"):
+            raise ValueError(f'direction must be "u" or "v", got {direction!r}')
+        along_v = direction == "v"
+        knots, degree = self.knots[along_v], self.degree[along_v]
+        times = check_insertion(knots, degree, value, times)
+        value = jnp.asarray(value, dtype=knots.dtype)
+        points = self.homogeneous_points()
+        points = jnp.swapaxes(points, 0, 1) if along_v else points
+        points, knots = insert(points, knots, degree, [value] * times)
+        if along_v:
+            return self._from_homogeneous_points(jnp.swapaxes(points, 0, 1), self.knots_u, knots)
+        return self._from_homogeneous_points(points, knots, self.knots_v)
+
+    def decompose(self) -> list[list["NURBSSurface"]]:
+        """The Bezier patches of the surface, `patches[i][j]` on the i-th u and j-th v span."""
+        (p, q), dtype = self.degree, self.knots_u.dtype
+        breaks_u, breaks_v = span_breaks(self.knots_u, p), span_breaks(self.knots_v, q)
+        strips = bezier_segments(self.homogeneous_points(), self.knots_u, p)
+        patches = []
+        for strip, u0, u1 in zip(strips, breaks_u[:-1], breaks_u[1:], strict=True):
+            knots_u = bezier_knots(u0, u1, p, dtype)
+            pieces = bezier_segments(jnp.swapaxes(strip, 0, 1), self.knots_v, q)
+            patches.append(
+                [
+                    self._from_homogeneous_points(
+                        jnp.swapaxes(piece, 0, 1), knots_u, bezier_knots(v0, v1, q, dtype)
+                    )
+                    for piece, v0, v1 in zip(pieces, breaks_v[:-1], breaks_v[1:], strict=True)
+                ]
+            )
+        return patches
 
     def _parameters(self, u, v):
         """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""

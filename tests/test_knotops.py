@@ -1,0 +1,77 @@
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from helpers import nine_point_circle, random_curve, random_surface
+
+import diffnurbs as dn
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 5])
+@pytest.mark.parametrize("rational", [False, True])
+def test_curve_insertion_keeps_the_shape(degree, rational):
+    rng = np.random.default_rng(degree + 10 * rational)
+    curve = random_curve(rng, degree, dim=3, rational=rational)
+    u = np.linspace(0, 1, 401)
+    value = 0.4321
+    inserted = curve.insert_knot(value, times=degree)
+    assert inserted.control_points.shape[0] == curve.control_points.shape[0] + degree
+    assert int(np.sum(np.asarray(inserted.knots) == value)) == degree
+    np.testing.assert_allclose(inserted(u), curve(u), atol=1e-12)
+    refined = curve.refine(rng.uniform(0.05, 0.95, size=6))
+    np.testing.assert_allclose(refined(u), curve(u), atol=1e-12)
+
+
+def test_decomposition_into_bezier_pieces():
+    circle = nine_point_circle(2.0)
+    pieces = circle.decompose()
+    assert len(pieces) == 4
+    for piece in pieces:
+        a, b = piece.domain
+        t = np.linspace(float(a), float(b), 33)
+        np.testing.assert_allclose(piece(t), circle(t), atol=1e-14)
+        local = (t - float(a)) / (float(b) - float(a))
+        bezier = dn.de_casteljau(piece.control_points, local, piece.weights)
+        np.testing.assert_allclose(bezier, circle(t), atol=1e-14)
+
+
+@pytest.mark.parametrize("direction", ["u", "v"])
+def test_surface_insertion_and_decomposition(direction):
+    rng = np.random.default_rng(3)
+    surface = random_surface(rng, (2, 3), counts=(5, 6))
+    u, v = rng.uniform(size=100), rng.uniform(size=100)
+    inserted = surface.insert_knot(0.61, direction, times=2)
+    np.testing.assert_allclose(inserted(u, v), surface(u, v), atol=1e-12)
+    for row in surface.decompose():
+        for patch in row:
+            (a, b), (c, d) = patch.domain
+            uu, vv = np.meshgrid(
+                np.linspace(float(a), float(b), 5), np.linspace(float(c), float(d), 5)
+            )
+            np.testing.assert_allclose(patch(uu, vv), surface(uu, vv), atol=1e-12)
+
+
+def test_inserted_knot_value_does_not_move_the_curve():
+    curve = random_curve(np.random.default_rng(4), 3, n_control=7, dim=2)
+    t = jnp.linspace(0, 1, 9)
+
+    @jax.jit
+    def loss(value):
+        return jnp.sum(curve.insert_knot(value)(t) ** 2)
+
+    np.testing.assert_allclose(loss(0.45), jnp.sum(curve(t) ** 2), rtol=1e-12)
+    np.testing.assert_allclose(jax.grad(loss)(0.45), 0.0, atol=1e-9)
+
+
+def test_bad_insertions():
+    curve = dn.NURBSCurve(np.zeros((5, 2)), 2, [0, 0, 0, 0.5, 0.5, 1, 1, 1])
+    with pytest.raises(ValueError, match="multiplicity 2; at most degree = 2"):
+        curve.insert_knot(0.5)
+    with pytest.raises(ValueError, match="domain"):
+        curve.insert_knot(1.5)
+    with pytest.raises(ValueError, match="times must be >= 1"):
+        curve.insert_knot(0.3, times=0)
+    with pytest.raises(ValueError, match="clamped end knots"):
+        dn.NURBSCurve(np.zeros((4, 2)), 2, [0, 1, 2, 3, 4, 5, 6]).decompose()
+    with pytest.raises(ValueError, match='direction must be "u" or "v"'):
+        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).insert_knot(0.5, "w")

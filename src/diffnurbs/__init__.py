@@ -30,6 +30,7 @@ from ._rational import (
     rational_surface_derivatives as rational_surface_derivatives,
     to_homogeneous as to_homogeneous,
 )
+from ._shapes import arc as arc, circle as circle, ellipse as ellipse
 from ._surface import NURBSSurface as NURBSSurface
 
 __version__ = "0.1.0"

@@ -1,0 +1,111 @@
+"""Exact conics as rational quadratic NURBS: circles, circular arcs, ellipses."""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import ArrayLike
+
+from ._curve import NURBSCurve
+from ._validate import check_degree, concrete
+
+
+def _arc_segments(sweep, segments):
+    """Bezier segments for a sweep: one per started quarter turn (4 when the sweep is traced)."""
+    if segments is not None:
+        return check_degree(segments, minimum=1, name="segments")
+    value = concrete(sweep)
+    if value is None:
+        return 4
+    if not 0 < abs(value) <= 2 * math.pi * (1 + 1e-12):
+        raise ValueError(f"the sweep angle must be non-zero and at most 2 pi, got {value}")
+    return max(1, math.ceil(abs(value) / (math.pi / 2) - 1e-9))
+
+
+def arc(
+    radius: ArrayLike,
+    start_angle: ArrayLike,
+    end_angle: ArrayLike,
+    center: ArrayLike = (0.0, 0.0),
+    segments: int | None = None,
+) -> NURBSCurve:
+    """The circular arc from `start_angle` to `end_angle` (radians, counterclockwise when
+    the end is larger), exactly, as a rational quadratic B-spline (NURBS Book A7.1).
+
+    Each Bezier segment spans at most a quarter turn: its middle control point is where
+    the end tangents meet, at distance `r / cos(h)` with weight `cos(h)`, `h` half the
+    segment's angle. Radius, angles and center may be traced (then 4 segments are used).
+
+    **Arguments:**
+
+    - `radius`: positive radius.
+    - `start_angle`, `end_angle`: angles in radians; `0 < |end - start| <= 2 pi`.
+    - `center`: the center; its length is the dimension (>= 2). In 3D the arc lies in the
+      plane of the first two axes through the center.
+    - `segments`: number of Bezier segments (default: one per started quarter turn).
+
+    **Returns:**
+
+    A `NURBSCurve` of degree 2 on the domain [0, 1].
+    """
+    center = jnp.asarray(center, dtype=jnp.result_type(float))
+    if center.ndim != 1 or center.shape[0] < 2:
+        raise ValueError(f"center must be a point of dimension >= 2, got shape {center.shape}")
+    radius_value = concrete(radius)
+    if radius_value is not None and not (np.isfinite(radius_value) and radius_value > 0):
+        raise ValueError(f"radius must be finite and positive, got {radius_value}")
+    sweep = jnp.asarray(end_angle, center.dtype) - jnp.asarray(start_angle, center.dtype)
+    count = _arc_segments(sweep, segments)
+    half = sweep / (2 * count)
+    odd = np.arange(2 * count + 1) % 2 == 1
+    angles = start_angle + half * np.arange(2 * count + 1)
+    distance = jnp.where(odd, radius / jnp.cos(half), radius)
+    planar = distance[:, None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
+    points = center + jnp.pad(planar, ((0, 0), (0, center.shape[0] - 2)))
+    weights = jnp.where(odd, jnp.cos(half), 1.0)
+    interior = np.repeat(np.arange(1, count) / count, 2)
+    knots = np.concatenate([[0.0] * 3, interior, [1.0] * 3])
+    return NURBSCurve(points, 2, jnp.asarray(knots, center.dtype), weights)
+
+
+def circle(radius: ArrayLike, center: ArrayLike = (0.0, 0.0)) -> NURBSCurve:
+    """The full circle, counterclockwise from angle 0: four quarter arcs (9 control points).
+
+    **Arguments:**
+
+    - `radius`: positive radius.
+    - `center`: the center; its length is the dimension (a 3D circle lies in the plane of
+      the first two axes).
+
+    **Returns:**
+
+    A closed `NURBSCurve` of degree 2 on [0, 1].
+    """
+    return arc(radius, 0.0, 2 * math.pi, center, segments=4)
+
+
+def ellipse(
+    semi_axis_a: ArrayLike, semi_axis_b: ArrayLike, center: ArrayLike = (0.0, 0.0)
+) -> NURBSCurve:
+    """The ellipse `(x / a)^2 + (y / b)^2 = 1` about `center`: the unit circle scaled.
+
+    NURBS are affine invariant, so scaling the control points of the exact circle gives
+    the exact ellipse with the same weights.
+
+    **Arguments:**
+
+    - `semi_axis_a`, `semi_axis_b`: positive semi-axes along the first and second axis.
+    - `center`: the center (dimension >= 2).
+
+    **Returns:**
+
+    A closed `NURBSCurve` of degree 2 on [0, 1].
+    """
+    unit = circle(1.0, jnp.zeros(len(center)))
+    for name, value in (("semi_axis_a", semi_axis_a), ("semi_axis_b", semi_axis_b)):
+        value = concrete(value)
+        if value is not None and not (np.isfinite(value) and value > 0):
+            raise ValueError(f"{name} must be finite and positive, got {value}")
+    scale = jnp.ones(len(center)).at[0].set(semi_axis_a).at[1].set(semi_axis_b)
+    points = unit.control_points * scale + jnp.asarray(center)
+    return NURBSCurve(points, 2, unit.knots, unit.weights)

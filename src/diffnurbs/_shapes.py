@@ -55,17 +55,35 @@ def arc(
     if radius_value is not None and not (np.isfinite(radius_value) and radius_value > 0):
         raise ValueError(f"radius must be finite and positive, got {radius_value}")
     sweep = jnp.asarray(end_angle, center.dtype) - jnp.asarray(start_angle, center.dtype)
+    planar, weights, knots = arc_net(start_angle, sweep, segments)
+    points = center + jnp.pad(radius * planar, ((0, 0), (0, center.shape[0] - 2)))
+    return NURBSCurve(points, 2, knots.astype(center.dtype), weights)
+
+
+def arc_net(start_angle, sweep, segments=None):
+    """Control points (on the unit circle's scale), weights and knots of an arc.
+
+    **Arguments:**
+
+    - `start_angle`, `sweep`: the arc in radians (either may be traced).
+    - `segments`: Bezier segments; default one per started quarter turn (4 if traced).
+
+    **Returns:**
+
+    `(points, weights, knots)`: `(2 s + 1, 2)` points of the arc of radius 1 about the
+    origin, their `2 s + 1` weights, and the `2 s + 4` knots on [0, 1].
+    """
     count = _arc_segments(sweep, segments)
-    half = sweep / (2 * count)
+    half = jnp.asarray(sweep) / (2 * count)
     odd = np.arange(2 * count + 1) % 2 == 1
     angles = start_angle + half * np.arange(2 * count + 1)
-    distance = jnp.where(odd, radius / jnp.cos(half), radius)
-    planar = distance[:, None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
-    points = center + jnp.pad(planar, ((0, 0), (0, center.shape[0] - 2)))
+    # The middle point of a segment is where its end tangents meet: at 1 / cos(half).
+    distance = jnp.where(odd, 1.0 / jnp.cos(half), 1.0)
+    points = distance[:, None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
     weights = jnp.where(odd, jnp.cos(half), 1.0)
     interior = np.repeat(np.arange(1, count) / count, 2)
-    knots = np.concatenate([[0.0] * 3, interior, [1.0] * 3])
-    return NURBSCurve(points, 2, jnp.asarray(knots, center.dtype), weights)
+    knots = jnp.asarray(np.concatenate([[0.0] * 3, interior, [1.0] * 3]))
+    return points, weights, knots
 
 
 def circle(radius: ArrayLike, center: ArrayLike = (0.0, 0.0)) -> NURBSCurve:

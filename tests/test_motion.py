@@ -67,6 +67,18 @@ def test_gradient_through_the_profile():
     assert np.all(np.isfinite(jax.grad(area_proxy)(profile.control_points)))
 
 
+@pytest.mark.parametrize("rational", [(False, False), (True, False), (True, True)])
+def test_translational_sweep_is_exact(rational):
+    rng = np.random.default_rng(5)
+    profile = random_curve(rng, 3, dim=3, rational=rational[0])
+    path = random_curve(rng, 2, dim=3, rational=rational[1], domain=(1.0, 3.0))
+    surface = dn.sweep(profile, path)
+    u, v = UV
+    v = 1.0 + 2.0 * v
+    expected = profile(u) + path(v) - path(1.0)
+    np.testing.assert_allclose(surface(u, v), expected, atol=1e-12)
+
+
 def test_bad_motion_input():
     curve = random_curve(np.random.default_rng(4), 2, dim=3)
     with pytest.raises(ValueError, match="direction must be non-zero"):
@@ -79,3 +91,5 @@ def test_bad_motion_input():
         dn.revolve(dn.circle(1.0), (0, 0, 0), (0, 0, 1))
     with pytest.raises(ValueError, match="sweep angle"):
         dn.revolve(curve, (0, 0, 0), (0, 0, 1), 0.0)
+    with pytest.raises(ValueError, match="same dimension"):
+        dn.sweep(curve, dn.circle(1.0))

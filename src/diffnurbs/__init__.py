@@ -17,7 +17,7 @@ from ._bezier import (
 )
 from ._curve import NURBSCurve as NURBSCurve
 from ._knots import clamped_knots as clamped_knots
-from ._motion import extrude as extrude, revolve as revolve
+from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
 from ._patches import (
     BEZIER_MATRIX as BEZIER_MATRIX,
     BSPLINE_MATRIX as BSPLINE_MATRIX,

@@ -99,3 +99,32 @@ def revolve(
     weights = _profile_weights(curve)[:, None] * arc_weights[None, :]
     knots = (curve.knots, knots_v.astype(curve.knots.dtype))
     return NURBSSurface(points, (curve.degree, 2), knots, weights)
+
+
+def sweep(profile: NURBSCurve, path: NURBSCurve) -> NURBSSurface:
+    """The translational sweep `S(u, v) = C(u) + g(v) - g(v_min)` (seed eq. 2.4), exactly.
+
+    The profile keeps its orientation while its start of path moves along `g`. With
+    `P_ij = C_i + G_j - g(v_min)` and `w_ij = w_i w_j`, the rational tensor product
+    reproduces the sum because each basis is a partition of unity (NURBS Book §8.4).
+
+    **Arguments:**
+
+    - `profile`: the curve `C(u)`.
+    - `path`: the curve `g(v)`, of the same dimension.
+
+    **Returns:**
+
+    A `NURBSSurface` of degree `(p, q)` on the two curves' domains.
+    """
+    if profile.dim != path.dim:
+        raise ValueError(
+            f"profile and path must have the same dimension, got {profile.dim} and {path.dim}"
+        )
+    start = path(path.domain[0])
+    points = profile.control_points[:, None, :] + (path.control_points - start)[None, :, :]
+    weights = None
+    if profile.rational or path.rational:
+        weights = _profile_weights(profile)[:, None] * _profile_weights(path)[None, :]
+    degree = (profile.degree, path.degree)
+    return NURBSSurface(points, degree, (profile.knots, path.knots), weights)

@@ -1,0 +1,77 @@
+"""Bezier patch files (`.bpt`): a patch count, then per patch its degrees `p q` and the
+`(p + 1)(q + 1)` control points `x y z`, row by row (the format of the Utah teapot file)."""
+
+from pathlib import Path
+
+import numpy as np
+
+from ._surface import NURBSSurface
+
+
+def _numbers(path):
+    try:
+        return Path(path).read_text().split()
+    except OSError as error:
+        raise ValueError(f"cannot read the Bezier patch file {path}: {error}") from error
+
+
+def read_bpt(path) -> list[NURBSSurface]:
+    """Read the Bezier patches of a `.bpt` file.
+
+    **Arguments:**
+
+    - `path`: the file.
+
+    **Returns:**
+
+    One non-rational `NURBSSurface` per patch, control points of shape `(p + 1, q + 1, 3)`.
+    """
+    tokens, position = _numbers(path), 0
+
+    def take(count, what):
+        nonlocal position
+        if position + count > len(tokens):
+            raise ValueError(f"{path}: the file ends inside {what} (expected {count} more numbers)")
+        chunk = tokens[position : position + count]
+        position += count
+        try:
+            return np.asarray(chunk, dtype=float)
+        except ValueError as error:
+            raise ValueError(f"{path}: {what} must be numbers, got {chunk}") from error
+
+    count = take(1, "the patch count")[0]
+    if count != int(count) or count < 0:
+        raise ValueError(f"{path}: the patch count must be a non-negative integer, got {count}")
+    patches = []
+    for k in range(int(count)):
+        p, q = take(2, f"the degrees of patch {k}").astype(int)
+        points = take(3 * (p + 1) * (q + 1), f"the control points of patch {k}")
+        patches.append(NURBSSurface(points.reshape(p + 1, q + 1, 3), (int(p), int(q))))
+    if position != len(tokens):
+        raise ValueError(
+            f"{path}: {len(tokens) - position} numbers left after the {int(count)} patches "
+            "the file announces"
+        )
+    return patches
+
+
+def write_bpt(path, patches) -> None:
+    """Write non-rational Bezier patches (3D, default knots) to a `.bpt` file.
+
+    **Arguments:**
+
+    - `path`: the file to write.
+    - `patches`: `NURBSSurface` objects, each a single Bezier patch.
+    """
+    lines = [str(len(patches))]
+    for k, patch in enumerate(patches):
+        p, q = patch.degree
+        points = np.asarray(patch.control_points)
+        if patch.rational or points.shape != (p + 1, q + 1, 3):
+            raise ValueError(
+                f"patch {k} must be a non-rational Bezier patch in 3D with (p + 1, q + 1) = "
+                f"{(p + 1, q + 1)} control points, got shape {points.shape}"
+            )
+        lines.append(f"{p} {q}")
+        lines.extend(" ".join(repr(float(x)) for x in point) for point in points.reshape(-1, 3))
+    Path(path).write_text("\n".join(lines) + "\n")

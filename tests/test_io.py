@@ -56,3 +56,21 @@ def test_write_rejects_rational_patches(tmp_path):
     patch = dn.NURBSSurface(np.zeros((2, 2, 3)), (1, 1), weights=np.ones((2, 2)))
     with pytest.raises(ValueError, match="non-rational Bezier patch"):
         io.write_bpt(tmp_path / "r.bpt", [patch])
+
+
+@pytest.mark.parametrize("suffix", [".stl", ".obj", ".vtk"])
+def test_mesh_export_round_trip(tmp_path, suffix):
+    pv = pytest.importorskip("pyvista")
+    sphere = dn.revolve(
+        dn.arc(2.0, -np.pi / 2, np.pi / 2, center=(0.0, 0.0, 0.0)), (0, 0, 0), (0, 1, 0)
+    )
+    path = tmp_path / f"sphere{suffix}"
+    io.export_mesh(path, sphere, samples=(20, 30))
+    mesh = pv.read(path)
+    assert mesh.n_points > 100 and mesh.n_cells > 100
+    np.testing.assert_allclose(np.linalg.norm(mesh.points, axis=-1), 2.0, atol=1e-5)
+
+
+def test_mesh_export_rejects_unknown_formats(tmp_path):
+    with pytest.raises(ValueError, match="not supported"):
+        io.export_mesh(tmp_path / "x.step", dn.NURBSSurface(np.zeros((2, 2, 3)), (1, 1)))

@@ -7,6 +7,8 @@ import numpy as np
 
 from ._surface import NURBSSurface
 
+_MESH_SUFFIXES = (".stl", ".obj", ".vtk", ".vtp", ".ply")
+
 
 def _numbers(path):
     try:
@@ -75,3 +77,40 @@ def write_bpt(path, patches) -> None:
         lines.append(f"{p} {q}")
         lines.extend(" ".join(repr(float(x)) for x in point) for point in points.reshape(-1, 3))
     Path(path).write_text("\n".join(lines) + "\n")
+
+
+def tessellate(surfaces, samples=(24, 24)):
+    """One triangle mesh (`pyvista.PolyData`) sampling every surface on an even grid.
+
+    **Arguments:**
+
+    - `surfaces`: a `NURBSSurface` or a list of them (e.g. the patches of an object).
+    - `samples`: grid points per patch along `u` and `v`.
+
+    **Returns:**
+
+    The merged, triangulated mesh with coincident patch-border points merged.
+    """
+    from . import viz  # pyvista is imported on first use
+
+    surfaces = [surfaces] if isinstance(surfaces, NURBSSurface) else list(surfaces)
+    if not surfaces:
+        raise ValueError("tessellate needs at least one surface")
+    pieces = [viz.surface_mesh(surface, samples).extract_surface() for surface in surfaces]
+    merged = pieces[0].merge(pieces[1:]) if len(pieces) > 1 else pieces[0]
+    return merged.triangulate().clean()
+
+
+def export_mesh(path, surfaces, samples=(24, 24)) -> None:
+    """Write the tessellated surfaces as STL, OBJ, VTK, VTP or PLY (chosen by the suffix).
+
+    **Arguments:**
+
+    - `path`: the file to write; its suffix picks the format.
+    - `surfaces`: a `NURBSSurface` or a list of them.
+    - `samples`: grid points per patch along `u` and `v`.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix not in _MESH_SUFFIXES:
+        raise ValueError(f"mesh format {suffix!r} not supported, expected one of {_MESH_SUFFIXES}")
+    tessellate(surfaces, samples).save(str(path))

@@ -1,6 +1,7 @@
 """Bezier patch files (`.bpt`): a patch count, then per patch its degrees `p q` and the
 `(p + 1)(q + 1)` control points `x y z`, row by row (the format of the Utah teapot file)."""
 
+from importlib import resources
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,19 @@ def _numbers(path):
         return Path(path).read_text().split()
     except OSError as error:
         raise ValueError(f"cannot read the Bezier patch file {path}: {error}") from error
+
+
+def load_object(name: str) -> list[NURBSSurface]:
+    """The Bezier patches of an object shipped with diffnurbs ("vase", "cup", "bell").
+
+    The files in `diffnurbs/data` are written by `tools/make_objects.py` from the profiles
+    in `diffnurbs._objects`; a test keeps them in sync.
+    """
+    path = resources.files("diffnurbs") / "data" / f"{name}.bpt"
+    if not path.is_file():
+        shipped = sorted(p.name for p in (resources.files("diffnurbs") / "data").iterdir())
+        raise ValueError(f"no object {name!r}; shipped: {shipped}")
+    return read_bpt(path)
 
 
 def read_bpt(path) -> list[NURBSSurface]:

@@ -9,6 +9,7 @@ The conventions it implements are written down for chapter authors in `course/AU
 from __future__ import annotations
 
 import ast
+import asyncio
 import contextlib
 import hashlib
 import io
@@ -20,11 +21,14 @@ import time
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from queue import Empty
 from typing import Any
 
 import nbformat
 import yaml
 from nbclient import NotebookClient
+from nbclient.client import timestamp
+from nbclient.util import ensure_async
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
 """The repository root (valid for the editable install the Makefile sets up)."""
@@ -168,6 +172,42 @@ def count_figures(nb: nbformat.NotebookNode) -> int:
     return count
 
 
+class PollingNotebookClient(NotebookClient):
+    """`NotebookClient` that waits for a cell's reply in one-second polls.
+
+    nbclient waits for the shell reply with a single `get_msg(timeout=cell timeout)`.
+    After a cell that displays ipywidgets (`interact`) that wait sometimes never wakes up
+    although the reply has arrived (jupyter/nbclient#312): the kernel sits idle and the
+    run hangs until the cell timeout. A fresh poll sees the waiting message, so polling
+    every second makes such runs finish normally.
+    """
+
+    async def _async_poll_for_reply(
+        self, msg_id, cell, timeout, task_poll_output_msg, task_poll_kernel_alive
+    ):
+        deadline = None if timeout is None else time.monotonic() + timeout
+        while True:
+            try:
+                msg = await ensure_async(self.kc.shell_channel.get_msg(timeout=1.0))
+            except Empty:
+                if deadline is not None and time.monotonic() > deadline:
+                    # Out of time: let nbclient check the kernel and raise as it does.
+                    return await super()._async_poll_for_reply(
+                        msg_id, cell, 0, task_poll_output_msg, task_poll_kernel_alive
+                    )
+                continue
+            if msg["parent_header"].get("msg_id") != msg_id:
+                continue
+            if self.record_timing:
+                cell["metadata"]["execution"]["shell.execute_reply"] = timestamp(msg)
+            try:
+                await asyncio.wait_for(task_poll_output_msg, self.iopub_timeout)
+            except (asyncio.TimeoutError, Empty):
+                self.log.warning("Timeout waiting for IOPub output")
+            task_poll_kernel_alive.cancel()
+            return msg
+
+
 def make_client(
     nb: nbformat.NotebookNode, cwd: Path, *, timeout: int | None, allow_errors: bool
 ) -> NotebookClient:
@@ -185,7 +225,7 @@ def make_client(
     A `NotebookClient` that kills its kernel immediately when done.
     """
     use_headless_defaults()
-    return NotebookClient(
+    return PollingNotebookClient(
         nb,
         kernel_name=KERNEL_NAME,
         timeout=timeout,

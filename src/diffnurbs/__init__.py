@@ -15,9 +15,19 @@ from ._bezier import (
     de_casteljau_volume as de_casteljau_volume,
     subdivide as subdivide,
 )
+from ._cubic import (
+    HERMITE_MATRIX as HERMITE_MATRIX,
+    cardinal_spline as cardinal_spline,
+    catmull_rom as catmull_rom,
+    cubic_matrix as cubic_matrix,
+    hermite_segment as hermite_segment,
+    matrix_segment as matrix_segment,
+    uniform_cubic_bspline as uniform_cubic_bspline,
+)
 from ._curve import NURBSCurve as NURBSCurve
 from ._knots import clamped_knots as clamped_knots
 from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
+from ._objects import design_object as design_object, revolution_patches as revolution_patches
 from ._patches import (
     BEZIER_MATRIX as BEZIER_MATRIX,
     BSPLINE_MATRIX as BSPLINE_MATRIX,

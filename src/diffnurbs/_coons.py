@@ -1,0 +1,213 @@
+"""Bilinear and bilinearly blended Coons patches (seed 002).
+
+A bilinear patch interpolates four corners; a Coons patch interpolates four boundary
+curves. Both are "transfinite" blends: the Coons patch is the sum of the two ruled
+surfaces between opposite boundaries minus the bilinear patch of the corners, which both
+ruled surfaces count once too often,
+
+`S(u, v) = L_c(u, v) + L_d(u, v) - B(u, v)`,
+
+- `L_c = (1 - v) c0(u) + v c1(u)` (ruled between the bottom and top curves),
+- `L_d = (1 - u) d0(v) + u d1(v)` (ruled between the left and right curves),
+- `B = (1 - u)(1 - v) P00 + u (1 - v) P10 + (1 - u) v P01 + u v P11`.
+"""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from ._curve import NURBSCurve, clamp_to_domain, safe_norm
+from ._surface import NURBSSurface
+from ._validate import check_parameter, check_rank, concrete, float_dtype
+
+
+def bilinear_patch(p00: ArrayLike, p10: ArrayLike, p01: ArrayLike, p11: ArrayLike) -> NURBSSurface:
+    """The bilinear patch through four corners (seed 002):
+    `S(u, v) = (1 - v) [(1 - u) p00 + u p10] + v [(1 - u) p01 + u p11]`.
+
+    Its isoparametric lines are straight; with non-coplanar corners it is a hyperbolic
+    paraboloid. (The seed labels the corner at `u = 1, v = 0` as `P01`; here the first
+    index runs along `u`, as in `NURBSSurface.control_points`.)
+
+    **Arguments:**
+
+    - `p00`, `p10`, `p01`, `p11`: the corners `S(0, 0)`, `S(1, 0)`, `S(0, 1)`, `S(1, 1)`,
+      points of one dimension.
+
+    **Returns:**
+
+    A `NURBSSurface` of degree `(1, 1)` on `[0, 1] x [0, 1]`.
+    """
+    corners = [jnp.asarray(p) for p in (p00, p10, p01, p11)]
+    for name, point in zip(("p00", "p10", "p01", "p11"), corners, strict=True):
+        check_rank(point, 1, name, "(a point, shape (dim,))")
+    shapes = {point.shape for point in corners}
+    if len(shapes) != 1:
+        raise ValueError(
+            f"the four corners must have the same dimension, got shapes "
+            f"{[point.shape for point in corners]}"
+        )
+    dtype = float_dtype(*corners)
+    c00, c10, c01, c11 = (point.astype(dtype) for point in corners)
+    return NURBSSurface(jnp.stack([jnp.stack([c00, c01]), jnp.stack([c10, c11])]), (1, 1))
+
+
+def _unit_to_domain(curve: NURBSCurve, t: Array) -> Array:
+    """`curve` at the parameter that `t` in [0, 1] maps to, linearly onto its domain."""
+    lower, upper = curve.domain
+    # (1 - t) a + t b hits both ends exactly; the clamp removes rounding just outside.
+    return curve(clamp_to_domain((1 - t) * lower + t * upper, lower, upper))
+
+
+# The corners as (u, v), each with the two curve ends that must meet there.
+_CORNERS = (
+    ((0, 0), ("c0", 0), ("d0", 0)),
+    ((1, 0), ("c0", 1), ("d1", 0)),
+    ((0, 1), ("c1", 0), ("d0", 1)),
+    ((1, 1), ("c1", 1), ("d1", 1)),
+)
+
+
+@eqx.filter_jit
+def _corners(curves, tol):
+    """Distances between the curve ends at each corner, the `(2, 2, dim)` corners (averaged
+    ends, first index along `u`) and the allowed distance `tol * size`."""
+    ends = {}
+    for name, curve in curves.items():
+        ends[name] = _unit_to_domain(curve, jnp.asarray([0.0, 1.0], curve.control_points.dtype))
+    all_points = jnp.concatenate([curve.control_points for curve in curves.values()])
+    size = safe_norm(jnp.max(all_points, axis=0) - jnp.min(all_points, axis=0))
+    gaps, corners = [], {}
+    for (u, v), (a, ia), (b, ib) in _CORNERS:
+        gaps.append(safe_norm(ends[a][ia] - ends[b][ib]))
+        corners[u, v] = 0.5 * (ends[a][ia] + ends[b][ib])
+    corners = jnp.stack(
+        [jnp.stack([corners[0, 0], corners[0, 1]]), jnp.stack([corners[1, 0], corners[1, 1]])]
+    )
+    return jnp.stack(gaps), corners, tol * size
+
+
+class CoonsPatch(eqx.Module):
+    """The bilinearly blended Coons patch of four boundary curves (seed 002).
+
+    `S(u, 0) = c0(u)`, `S(u, 1) = c1(u)`, `S(0, v) = d0(v)`, `S(1, v) = d1(v)` on
+    `[0, 1] x [0, 1]`; each curve's own domain is mapped linearly onto [0, 1]. The
+    patch is evaluated directly as `L_c + L_d - B` (see the module docstring), so rational
+    curves are reproduced exactly. Corners are the averages of the two curve ends that
+    meet there (equal within `tol` by construction).
+
+    No exact NURBS form (`to_nurbs`) is offered yet: it needs degree elevation and knot
+    merging of opposite curves, which the library does not have.
+    """
+
+    c0: NURBSCurve
+    c1: NURBSCurve
+    d0: NURBSCurve
+    d1: NURBSCurve
+    corners: Float[Array, "2 2 dim"]
+
+    def __init__(
+        self,
+        c0: NURBSCurve,
+        c1: NURBSCurve,
+        d0: NURBSCurve,
+        d1: NURBSCurve,
+        tol: float = 1e-9,
+    ):
+        """**Arguments:**
+
+        - `c0`, `c1`: the curves at `v = 0` and `v = 1`, running in `u`.
+        - `d0`, `d1`: the curves at `u = 0` and `u = 1`, running in `v`.
+        - `tol`: allowed distance between curve ends meeting at a corner, relative to the
+          size (bounding-box diagonal) of all control points.
+
+        Concrete curves whose ends miss a corner raise `ValueError`; under tracing the
+        check goes through `eqx.error_if`.
+        """
+        curves = {"c0": c0, "c1": c1, "d0": d0, "d1": d1}
+        for name, curve in curves.items():
+            if not isinstance(curve, NURBSCurve):
+                raise ValueError(f"{name} must be a NURBSCurve, got {type(curve).__name__}")
+        dims = {name: curve.control_points.shape[-1] for name, curve in curves.items()}
+        if len(set(dims.values())) != 1:
+            raise ValueError(f"the four curves must have the same dimension, got {dims}")
+        gaps, corners, limit = _corners(curves, tol)
+        gap_values, limit_value = concrete(gaps), concrete(limit)
+        if gap_values is None or limit_value is None:
+            corners = eqx.error_if(
+                corners, jnp.any(gaps > limit), "the boundary curves do not meet at a corner"
+            )
+        else:
+            for gap, ((u, v), (a, ia), (b, ib)) in zip(gap_values, _CORNERS, strict=True):
+                if gap > limit_value:
+                    raise ValueError(
+                        f"corner (u, v) = ({u}, {v}): {a} at its {('start', 'end')[ia]} and "
+                        f"{b} at its {('start', 'end')[ib]} are {gap:.3g} apart; expected "
+                        f"<= tol * size = {limit_value:.3g}"
+                    )
+        self.c0, self.c1, self.d0, self.d1 = c0, c1, d0, d1
+        self.corners = corners
+
+    def _parameters(self, u, v):
+        dtype = self.corners.dtype
+        u, v = jnp.asarray(u, dtype), jnp.asarray(v, dtype)
+        check_parameter(u, 0.0, 1.0, "u")
+        check_parameter(v, 0.0, 1.0, "v")
+        return u, v
+
+    def _blend(self, cu0, cu1, dv0, dv1, u, v):
+        """`L_c + L_d - B` from the boundary points; `u`, `v` with a trailing axis."""
+        (p00, p01), (p10, p11) = self.corners
+        ruled_c = (1 - v) * cu0 + v * cu1
+        ruled_d = (1 - u) * dv0 + u * dv1
+        corners = (1 - u) * ((1 - v) * p00 + v * p01) + u * ((1 - v) * p10 + v * p11)
+        return ruled_c + ruled_d - corners
+
+    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... dim"]:
+        """Points `S(u, v)` for `u`, `v` in [0, 1], broadcast against each other."""
+        return self._points(*jnp.broadcast_arrays(*self._parameters(u, v)))
+
+    # One compiled function per patch and shape, instead of one per boundary curve.
+    @eqx.filter_jit
+    def _points(self, u: Array, v: Array) -> Array:
+        cu0, cu1 = _unit_to_domain(self.c0, u), _unit_to_domain(self.c1, u)
+        dv0, dv1 = _unit_to_domain(self.d0, v), _unit_to_domain(self.d1, v)
+        return self._blend(cu0, cu1, dv0, dv1, u[..., None], v[..., None])
+
+    def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
+        """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`.
+
+        Each boundary curve is evaluated once per grid line, not once per point.
+        """
+        us, vs = self._parameters(us, vs)
+        check_rank(us, 1, "us", "(a 1-D array of u values)")
+        check_rank(vs, 1, "vs", "(a 1-D array of v values)")
+        return self._grid(us, vs)
+
+    @eqx.filter_jit
+    def _grid(self, us: Array, vs: Array) -> Array:
+        cu0, cu1 = (_unit_to_domain(c, us)[:, None, :] for c in (self.c0, self.c1))
+        dv0, dv1 = (_unit_to_domain(d, vs)[None, :, :] for d in (self.d0, self.d1))
+        return self._blend(cu0, cu1, dv0, dv1, us[:, None, None], vs[None, :, None])
+
+
+def coons(
+    c0: NURBSCurve, c1: NURBSCurve, d0: NURBSCurve, d1: NURBSCurve, tol: float = 1e-9
+) -> CoonsPatch:
+    """The bilinearly blended Coons patch with `S(u, 0) = c0`, `S(u, 1) = c1`,
+    `S(0, v) = d0`, `S(1, v) = d1` (seed 002); see `CoonsPatch`.
+
+    **Arguments:**
+
+    - `c0`, `c1`, `d0`, `d1`: `NURBSCurve`s on any domains (mapped linearly to [0, 1]),
+      meeting at the four corners.
+    - `tol`: allowed corner mismatch relative to the curves' size.
+
+    **Returns:**
+
+    A `CoonsPatch`, callable as `patch(u, v)` and `patch.grid(us, vs)`.
+    """
+    if not np.isscalar(tol) or not tol >= 0:
+        raise ValueError(f"tol must be a number >= 0, got {tol!r}")
+    return CoonsPatch(c0, c1, d0, d1, tol)

@@ -15,6 +15,7 @@ from ._bezier import (
     de_casteljau_volume as de_casteljau_volume,
     subdivide as subdivide,
 )
+from ._coons import CoonsPatch as CoonsPatch, bilinear_patch as bilinear_patch, coons as coons
 from ._cubic import (
     HERMITE_MATRIX as HERMITE_MATRIX,
     cardinal_spline as cardinal_spline,
@@ -25,6 +26,7 @@ from ._cubic import (
     uniform_cubic_bspline as uniform_cubic_bspline,
 )
 from ._curve import NURBSCurve as NURBSCurve
+from ._ffd import deform_image as deform_image, ffd as ffd, ffd_lattice as ffd_lattice
 from ._knots import clamped_knots as clamped_knots
 from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
 from ._objects import design_object as design_object, revolution_patches as revolution_patches

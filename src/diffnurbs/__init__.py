@@ -27,6 +27,11 @@ from ._cubic import (
 )
 from ._curve import NURBSCurve as NURBSCurve
 from ._ffd import deform_image as deform_image, ffd as ffd, ffd_lattice as ffd_lattice
+from ._frames import (
+    KinematicSweep as KinematicSweep,
+    frames as frames,
+    kinematic_sweep as kinematic_sweep,
+)
 from ._knots import clamped_knots as clamped_knots
 from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
 from ._objects import design_object as design_object, revolution_patches as revolution_patches

@@ -132,3 +132,17 @@ def test_basis_works_in_float32():
     _span, funs = dn.basis_funs(knots, 2, jnp.linspace(0, 1, 5, dtype=jnp.float32))
     assert funs.dtype == jnp.float32
     np.testing.assert_allclose(funs.sum(-1), 1.0, atol=1e-6)
+
+
+def test_basis_matrix_matches_the_recursion():
+    knots = jnp.asarray([0.0, 0, 0, 0.2, 0.5, 0.5, 0.8, 1, 1, 1])
+    u = jnp.linspace(0.0, 1.0, 23)
+    matrix = dn.basis_matrix(knots, 2, u)
+    expected = jnp.stack([dn.cox_de_boor(knots, 2, i, u) for i in range(7)], axis=1)
+    assert matrix.shape == (23, 7)
+    np.testing.assert_allclose(matrix, expected, atol=1e-14)
+
+
+def test_basis_matrix_rejects_a_grid():
+    with pytest.raises(ValueError, match="1-D array"):
+        dn.basis_matrix(jnp.asarray([0.0, 0, 1, 1]), 1, jnp.zeros((2, 2)))

@@ -2,6 +2,7 @@
 
 from ._basis import (
     basis_funs as basis_funs,
+    basis_matrix as basis_matrix,
     bernstein as bernstein,
     cox_de_boor as cox_de_boor,
     ders_basis_funs as ders_basis_funs,

@@ -95,6 +95,37 @@ def basis_funs(
     return span, jnp.stack(funs, axis=-1)
 
 
+def dense_basis(span: Array, funs: Array, degree: int, n_control: int) -> Array:
+    """The local functions of `basis_funs` spread into a `(len(span), n_control)` matrix,
+    zeros off the band."""
+    first = (span - degree)[:, None]
+    column = jnp.arange(n_control)
+    return sum(funs[:, r, None] * (column == first + r) for r in range(degree + 1))
+
+
+def basis_matrix(knots: ArrayLike, degree: int, u: ArrayLike) -> Float[Array, "m n+1"]:
+    """The collocation matrix `A[k, i] = N_{i,p}(u_k)` of all basis functions.
+
+    Interpolation and least squares solve with it; a curve's points are `A @ P`.
+
+    **Arguments:**
+
+    - `knots`: non-decreasing knot vector of length `n + p + 2`.
+    - `degree`: the degree `p`.
+    - `u`: 1-D array of `m` parameters.
+
+    **Returns:**
+
+    Dense array of shape `(m, n + 1)`, `p + 1` non-zeros per row at most.
+    """
+    knots = jnp.asarray(knots)
+    u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
+    if u.ndim != 1:
+        raise ValueError(f"u must be a 1-D array of parameters, got shape {u.shape}")
+    span, funs = basis_funs(knots, degree, u)
+    return dense_basis(span, funs, degree, knots.shape[0] - degree - 1)
+
+
 def _ndu_table(left, right, degree, u):
     """Triangular table of A2.3: basis functions (upper) and knot differences (lower)."""
     ndu = [[None] * (degree + 1) for _ in range(degree + 1)]

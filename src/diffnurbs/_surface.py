@@ -4,7 +4,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._basis import basis_funs, ders_basis_funs
+from ._basis import basis_funs, dense_basis, ders_basis_funs
 from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
 from ._knotops import bezier_knots, bezier_segments, check_insertion, insert, span_breaks
 from ._knots import clamped_knots
@@ -24,13 +24,6 @@ from ._validate import (
 # Above this many control points in a direction, a dense basis matrix wastes more work on
 # zeros than the matrix product saves over the banded gathers.
 _DENSE_GRID_LIMIT = 64
-
-
-def dense_basis(span: Array, funs: Array, degree: int, n_control: int) -> Array:
-    """All basis functions as a `(len(span), n_control)` matrix, zeros off the band."""
-    first = (span - degree)[:, None]
-    column = jnp.arange(n_control)
-    return sum(funs[:, r, None] * (column == first + r) for r in range(degree + 1))
 
 
 def _pair(value, name):

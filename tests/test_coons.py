@@ -216,3 +216,21 @@ def test_coons_errors():
         patch.grid(T, [-0.1])
     with pytest.raises(ValueError, match="us must have 1 dimensions"):
         patch.grid(T[:, None], T)
+
+
+def test_to_nurbs_is_the_same_patch():
+    p00, p10, p01, p11 = CORNERS
+    c0 = _random_curve(p00, p10, 6, 3, (2.0, 5.0), False)
+    c1 = _random_curve(p01, p11, 4, 2, (-1.0, 0.5), False)
+    d0 = _random_curve(p00, p01, 5, 2, (0.0, 1.0), False)
+    d1 = _random_curve(p10, p11, 7, 4, (3.0, 3.25), False)
+    patch = coons(c0, c1, d0, d1)
+    surface = patch.to_nurbs()
+    assert isinstance(surface, dn.NURBSSurface)
+    assert surface.degree == (3, 4)
+    np.testing.assert_allclose(surface.grid(T, T), patch.grid(T, T), atol=1e-12)
+
+
+def test_to_nurbs_refuses_rational_boundaries():
+    with pytest.raises(ValueError, match="non-rational boundary curves"):
+        coons(*_random_boundary()).to_nurbs()

@@ -75,3 +75,66 @@ def test_bad_insertions():
         dn.NURBSCurve(np.zeros((4, 2)), 2, [0, 1, 2, 3, 4, 5, 6]).decompose()
     with pytest.raises(ValueError, match='direction must be "u" or "v"'):
         dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).insert_knot(0.5, "w")
+
+
+@pytest.mark.parametrize("degree, times", [(1, 1), (2, 1), (3, 2)])
+@pytest.mark.parametrize("rational", [False, True])
+def test_degree_elevation_keeps_the_shape_and_the_continuity(degree, times, rational):
+    rng = np.random.default_rng(20 + degree)
+    interior = [0.3, 0.3, 0.7][: degree + 1] if degree > 1 else [0.3, 0.7]
+    knots = np.r_[[0.0] * (degree + 1), interior, [1.0] * (degree + 1)]
+    n_control = len(knots) - degree - 1
+    weights = rng.uniform(0.3, 3.0, n_control) if rational else None
+    curve = dn.NURBSCurve(rng.normal(size=(n_control, 3)), degree, knots, weights)
+    elevated = curve.elevate_degree(times)
+    assert elevated.degree == degree + times
+    assert elevated.rational == rational
+    # Every distinct knot appears `times` more often: the continuity C^(p - m) is kept.
+    values, counts = np.unique(knots, return_counts=True)
+    new_values, new_counts = np.unique(np.asarray(elevated.knots), return_counts=True)
+    np.testing.assert_array_equal(new_values, values)
+    np.testing.assert_array_equal(new_counts, counts + times)
+    u = np.linspace(0, 1, 501)
+    np.testing.assert_allclose(elevated(u), curve(u), atol=1e-12)
+
+
+def test_elevating_a_bezier_curve_matches_the_closed_form():
+    # Degree elevation of a Bezier curve: Q_i = i/(n+1) P_{i-1} + (1 - i/(n+1)) P_i.
+    points = np.random.default_rng(5).normal(size=(4, 2))
+    n = len(points) - 1
+    padded = np.r_[points[:1] * 0, points, points[:1] * 0]
+    i = np.arange(n + 2)[:, None]
+    expected = i / (n + 1) * padded[i[:, 0]] + (1 - i / (n + 1)) * padded[i[:, 0] + 1]
+    elevated = dn.NURBSCurve(points, n).elevate_degree()
+    np.testing.assert_allclose(elevated.control_points, expected, atol=1e-13)
+
+
+@pytest.mark.parametrize("direction", ["u", "v"])
+def test_surface_degree_elevation(direction):
+    rng = np.random.default_rng(8)
+    surface = random_surface(rng, (2, 1), counts=(4, 3))
+    elevated = surface.elevate_degree(2, direction)
+    expected = (4, 1) if direction == "u" else (2, 3)
+    assert elevated.degree == expected
+    u, v = rng.uniform(size=200), rng.uniform(size=200)
+    np.testing.assert_allclose(elevated(u, v), surface(u, v), atol=1e-12)
+
+
+def test_degree_elevation_is_differentiable_in_the_control_points():
+    curve = random_curve(np.random.default_rng(9), 2, n_control=5, dim=2, rational=False)
+    u = jnp.linspace(0, 1, 7)
+
+    def moment(points, elevate):
+        moved = dn.NURBSCurve(points, 2, curve.knots)
+        return jnp.sum(jnp.sin((moved.elevate_degree() if elevate else moved)(u)))
+
+    expected = jax.grad(moment)(curve.control_points, False)
+    np.testing.assert_allclose(jax.grad(moment)(curve.control_points, True), expected, atol=1e-12)
+
+
+def test_degree_elevation_rejects_bad_times():
+    curve = random_curve(np.random.default_rng(10), 2, dim=2)
+    with pytest.raises(ValueError, match="times"):
+        curve.elevate_degree(0)
+    with pytest.raises(ValueError, match="direction"):
+        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).elevate_degree(1, "w")

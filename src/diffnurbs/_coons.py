@@ -18,6 +18,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._curve import NURBSCurve, clamp_to_domain, safe_norm
+from ._knotops import greville, merged_knots, missing_knots
 from ._surface import NURBSSurface
 from ._validate import check_parameter, check_rank, concrete, float_dtype
 
@@ -95,10 +96,8 @@ class CoonsPatch(eqx.Module):
     `[0, 1] x [0, 1]`; each curve's own domain is mapped linearly onto [0, 1]. The
     patch is evaluated directly as `L_c + L_d - B` (see the module docstring), so rational
     curves are reproduced exactly. Corners are the averages of the two curve ends that
-    meet there (equal within `tol` by construction).
-
-    No exact NURBS form (`to_nurbs`) is offered yet: it needs degree elevation and knot
-    merging of opposite curves, which the library does not have.
+    meet there (equal within `tol` by construction). `to_nurbs` gives the exact
+    `NURBSSurface` of a patch with non-rational boundaries.
     """
 
     c0: NURBSCurve
@@ -190,6 +189,51 @@ class CoonsPatch(eqx.Module):
         cu0, cu1 = (_unit_to_domain(c, us)[:, None, :] for c in (self.c0, self.c1))
         dv0, dv1 = (_unit_to_domain(d, vs)[None, :, :] for d in (self.d0, self.d1))
         return self._blend(cu0, cu1, dv0, dv1, us[:, None, None], vs[None, :, None])
+
+    def to_nurbs(self) -> NURBSSurface:
+        """The patch as an exact B-spline surface (non-rational boundary curves, concrete knots).
+
+        Opposite curves get one degree and one knot vector on [0, 1] (degree elevation and
+        knot refinement). The B-spline coefficients of `u -> u` are the Greville abscissae
+        `xi_i` (linear precision), so every term of `L_c + L_d - B` is a tensor product in
+        the common bases and the control points are
+        `(1 - eta_j) C0_i + eta_j C1_i + (1 - xi_i) D0_j + xi_i D1_j - B(xi_i, eta_j)`.
+
+        **Returns:**
+
+        A `NURBSSurface` on `[0, 1] x [0, 1]` equal to the patch.
+        """
+        rational = [name for name in ("c0", "c1", "d0", "d1") if getattr(self, name).rational]
+        if rational:
+            raise ValueError(
+                f"to_nurbs needs non-rational boundary curves, but {rational} have weights: "
+                "the blend of rational curves has the product of their weight functions as "
+                "denominator; evaluate the CoonsPatch directly instead"
+            )
+        c0, c1 = _compatible(self.c0, self.c1)
+        d0, d1 = _compatible(self.d0, self.d1)
+        xi = greville(c0.knots, c0.degree)[:, None, None]
+        eta = greville(d0.knots, d0.degree)[None, :, None]
+        cu0, cu1 = (c.control_points[:, None, :] for c in (c0, c1))
+        dv0, dv1 = (d.control_points[None, :, :] for d in (d0, d1))
+        points = self._blend(cu0, cu1, dv0, dv1, xi, eta)
+        return NURBSSurface(points, (c0.degree, d0.degree), (c0.knots, d0.knots))
+
+
+def _on_unit_domain(curve: NURBSCurve) -> NURBSCurve:
+    """The same curve with its knots mapped linearly onto the domain [0, 1]."""
+    lower, upper = curve.domain
+    knots = (curve.knots - lower) / (upper - lower)
+    return NURBSCurve(curve.control_points, curve.degree, knots, curve.weights)
+
+
+def _compatible(a: NURBSCurve, b: NURBSCurve) -> tuple[NURBSCurve, NURBSCurve]:
+    """`a` and `b` on [0, 1] with one degree and one knot vector, shapes unchanged."""
+    a, b = _on_unit_domain(a), _on_unit_domain(b)
+    degree = max(a.degree, b.degree)
+    a, b = (c if c.degree == degree else c.elevate_degree(degree - c.degree) for c in (a, b))
+    target = merged_knots(np.asarray(a.knots), np.asarray(b.knots))
+    return tuple(c.refine(missing_knots(np.asarray(c.knots), target)) for c in (a, b))
 
 
 def coons(

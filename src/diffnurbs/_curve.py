@@ -7,7 +7,14 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs, find_span
-from ._knotops import bezier_knots, bezier_segments, check_insertion, insert, span_breaks
+from ._knotops import (
+    bezier_knots,
+    bezier_segments,
+    check_insertion,
+    elevate,
+    insert,
+    span_breaks,
+)
 from ._knots import clamped_knots
 from ._quadrature import integrate_panels
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_curve_derivatives
@@ -123,11 +130,14 @@ class NURBSCurve(AbstractRationalSpline):
         """`(knots[p], knots[n + 1])`, the parameter interval."""
         return self.knots[self.degree], self.knots[-self.degree - 1]
 
-    def _from_homogeneous_points(self, points: Array, knots: Array) -> "NURBSCurve":
-        """A curve of the same degree and kind from homogeneous control points."""
+    def _from_homogeneous_points(
+        self, points: Array, knots: Array, degree: int | None = None
+    ) -> "NURBSCurve":
+        """A curve of the same kind (and degree, unless given) from homogeneous points."""
+        degree = self.degree if degree is None else degree
         if not self.rational:
-            return NURBSCurve(points, self.degree, knots)
-        return NURBSCurve(from_homogeneous(points), self.degree, knots, points[:, -1])
+            return NURBSCurve(points, degree, knots)
+        return NURBSCurve(from_homogeneous(points), degree, knots, points[:, -1])
 
     def insert_knot(self, u: ArrayLike, times: int = 1) -> "NURBSCurve":
         """The same curve with the knot `u` inserted `times` times (Boehm, NURBS Book A5.1).
@@ -146,6 +156,15 @@ class NURBSCurve(AbstractRationalSpline):
         for u in jnp.asarray(values, dtype=self.knots.dtype).ravel():
             curve = curve.insert_knot(u)
         return curve
+
+    def elevate_degree(self, times: int = 1) -> "NURBSCurve":
+        """The same curve with its degree raised by `times` (every knot `times` more often).
+
+        Exact up to rounding; needs concrete knots (see `_knotops.elevate`).
+        """
+        times = check_degree(times, minimum=1, name="times")
+        points, knots = elevate(self.homogeneous_points(), self.knots, self.degree, times)
+        return self._from_homogeneous_points(points, knots, self.degree + times)
 
     def decompose(self) -> list["NURBSCurve"]:
         """The Bezier pieces of the curve, one per non-empty knot span (clamped, concrete knots)."""

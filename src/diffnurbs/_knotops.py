@@ -1,4 +1,5 @@
-"""Knot insertion (Boehm's algorithm, NURBS Book A5.1), refinement and Bezier decomposition.
+"""Knot insertion (Boehm's algorithm, NURBS Book A5.1), refinement, Bezier decomposition,
+degree elevation and knot merging.
 
 The functions work on homogeneous control points along axis 0, so the same code serves
 curves and either direction of a surface. A knot value may be traced: the span is found
@@ -9,7 +10,7 @@ shapes depend only on how many knots are inserted.
 import jax.numpy as jnp
 import numpy as np
 
-from ._basis import find_span
+from ._basis import basis_matrix, find_span
 from ._validate import check_degree, concrete
 
 
@@ -118,3 +119,70 @@ def bezier_knots(a, b, degree, dtype):
 def span_breaks(knots, degree):
     """The distinct knots of the domain: the ends of the Bezier pieces (concrete knots)."""
     return np.unique(np.asarray(knots)[degree : len(knots) - degree])
+
+
+def greville(knots, degree):
+    """Greville abscissae `(u_{i+1} + ... + u_{i+p}) / p`, one per control point."""
+    n_control = knots.shape[0] - degree - 1
+    return sum(knots[1 + j : 1 + j + n_control] for j in range(degree)) / degree
+
+
+def _elevated_knot_indices(knots, times):
+    """Indices into `knots` that repeat every distinct value `times` more times."""
+    starts = np.flatnonzero(np.r_[True, knots[1:] != knots[:-1]])
+    repeats = np.ones(len(knots), dtype=int)
+    repeats[starts] += times
+    return np.repeat(np.arange(len(knots)), repeats)
+
+
+def elevate(points, knots, degree, times):
+    """Raise the degree by `times` without changing the curve.
+
+    The curve lies in the spline space of degree `p + times` whose knots are the old ones,
+    each distinct value `times` more often (the continuity at a knot stays the same). Its
+    control points there are found by collocation at the Greville abscissae of that space,
+    which satisfy the Schoenberg-Whitney condition, so the system is square and regular.
+    This replaces NURBS Book A5.9 (Bezier decomposition, elevation, knot removal) with one
+    banded solve, and it is differentiable in the control points.
+
+    **Arguments:**
+
+    - `points`: homogeneous control points, shape `(n + 1, ...)`.
+    - `knots`: concrete knot vector (the multiplicities decide the new one).
+    - `degree`: the degree `p`.
+    - `times`: how much to raise the degree, at least 1.
+
+    **Returns:**
+
+    `(points, knots)` of degree `p + times`.
+    """
+    values = concrete(knots)
+    if values is None:
+        raise ValueError(
+            "degree elevation needs concrete knots: their multiplicities decide the new knot vector"
+        )
+    new_degree = degree + times
+    new_knots = knots[_elevated_knot_indices(values, times)]
+    sites = greville(new_knots, new_degree)
+    flat = points.reshape(points.shape[0], -1)
+    values_at_sites = basis_matrix(knots, degree, sites) @ flat
+    new_points = jnp.linalg.solve(basis_matrix(new_knots, new_degree, sites), values_at_sites)
+    return new_points.reshape((-1, *points.shape[1:])), new_knots
+
+
+def missing_knots(knots, target):
+    """The knots to insert into `knots` to reach the non-decreasing `target` (concrete)."""
+    values, counts = np.unique(target, return_counts=True)
+    have = np.array([np.sum(knots == value) for value in values])
+    if np.any(have > counts):
+        extra = values[have > counts]
+        raise ValueError(f"knots {extra} are more frequent than in the target knot vector")
+    return np.repeat(values, counts - have)
+
+
+def merged_knots(*knot_vectors):
+    """The smallest knot vector containing each of `knot_vectors` (concrete, same degree):
+    every value with its largest multiplicity."""
+    values = np.unique(np.concatenate(knot_vectors))
+    counts = [max(np.sum(knots == value) for knots in knot_vectors) for value in values]
+    return np.repeat(values, counts)

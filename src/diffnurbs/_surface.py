@@ -6,7 +6,14 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, dense_basis, ders_basis_funs
 from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
-from ._knotops import bezier_knots, bezier_segments, check_insertion, insert, span_breaks
+from ._knotops import (
+    bezier_knots,
+    bezier_segments,
+    check_insertion,
+    elevate,
+    insert,
+    span_breaks,
+)
 from ._knots import clamped_knots
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_surface_derivatives
 from ._validate import (
@@ -97,30 +104,47 @@ class NURBSSurface(AbstractRationalSpline):
         p, q = self.degree
         return (self.knots_u[p], self.knots_u[-p - 1]), (self.knots_v[q], self.knots_v[-q - 1])
 
-    def _from_homogeneous_points(self, points, knots_u, knots_v) -> "NURBSSurface":
-        """A surface of the same degrees and kind from homogeneous control points."""
+    def _from_homogeneous_points(self, points, knots_u, knots_v, degree=None) -> "NURBSSurface":
+        """A surface of the same kind (and degrees, unless given) from homogeneous points."""
+        degree = self.degree if degree is None else degree
         if not self.rational:
-            return NURBSSurface(points, self.degree, (knots_u, knots_v))
+            return NURBSSurface(points, degree, (knots_u, knots_v))
         weights = points[..., -1]
-        return NURBSSurface(from_homogeneous(points), self.degree, (knots_u, knots_v), weights)
+        return NURBSSurface(from_homogeneous(points), degree, (knots_u, knots_v), weights)
+
+    def _along(self, direction: str, operation) -> "NURBSSurface":
+        """Apply a curve operation `(points, knots, degree) -> (points, knots)` to every row
+        (`direction="u"`) or column (`"v"`) of the homogeneous net."""
+        if direction not in ("u", "v"):
+            raise ValueError(f'direction must be "u" or "v", got {direction!r}')
+        along_v = direction == "v"
+        points = self.homogeneous_points()
+        points = jnp.swapaxes(points, 0, 1) if along_v else points
+        points, knots = operation(points, self.knots[along_v], self.degree[along_v])
+        degree = knots.shape[0] - points.shape[0] - 1  # raised by degree elevation
+        if along_v:
+            return self._from_homogeneous_points(
+                jnp.swapaxes(points, 0, 1), self.knots_u, knots, (self.degree[0], degree)
+            )
+        return self._from_homogeneous_points(points, knots, self.knots_v, (degree, self.degree[1]))
 
     def insert_knot(self, value: ArrayLike, direction: str = "u", times: int = 1) -> "NURBSSurface":
         """The same surface with a knot inserted `times` times along `direction` ("u" or "v").
 
         Boehm's algorithm (NURBS Book A5.3) on every row or column of the net.
         """
-        if direction not in ("u", "v"):
-            raise ValueError(f'direction must be "u" or "v", got {direction!r}')
-        along_v = direction == "v"
-        knots, degree = self.knots[along_v], self.degree[along_v]
-        times = check_insertion(knots, degree, value, times)
-        value = jnp.asarray(value, dtype=knots.dtype)
-        points = self.homogeneous_points()
-        points = jnp.swapaxes(points, 0, 1) if along_v else points
-        points, knots = insert(points, knots, degree, [value] * times)
-        if along_v:
-            return self._from_homogeneous_points(jnp.swapaxes(points, 0, 1), self.knots_u, knots)
-        return self._from_homogeneous_points(points, knots, self.knots_v)
+
+        def operation(points, knots, degree):
+            count = check_insertion(knots, degree, value, times)
+            return insert(points, knots, degree, [jnp.asarray(value, knots.dtype)] * count)
+
+        return self._along(direction, operation)
+
+    def elevate_degree(self, times: int = 1, direction: str = "u") -> "NURBSSurface":
+        """The same surface with its degree along `direction` raised by `times`
+        (see `NURBSCurve.elevate_degree`)."""
+        times = check_degree(times, minimum=1, name="times")
+        return self._along(direction, lambda points, knots, p: elevate(points, knots, p, times))
 
     def decompose(self) -> list[list["NURBSSurface"]]:
         """The Bezier patches of the surface, `patches[i][j]` on the i-th u and j-th v span."""

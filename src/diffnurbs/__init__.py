@@ -33,6 +33,7 @@ from ._frames import (
     frames as frames,
     kinematic_sweep as kinematic_sweep,
 )
+from ._halfedge import HalfEdgeMesh as HalfEdgeMesh, weld_vertices as weld_vertices
 from ._knots import clamped_knots as clamped_knots
 from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
 from ._objects import design_object as design_object, revolution_patches as revolution_patches

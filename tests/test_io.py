@@ -71,6 +71,20 @@ def test_mesh_export_round_trip(tmp_path, suffix):
     np.testing.assert_allclose(np.linalg.norm(mesh.points, axis=-1), 2.0, atol=1e-5)
 
 
+@pytest.mark.parametrize("name", ["vase", "cup", "bell"])
+def test_tessellated_objects_are_open_only_at_the_rim(name):
+    pytest.importorskip("pyvista")
+    patches = io.load_object(name)
+    mesh = io.tessellate(patches, (6, 6))
+    open_edges = mesh.extract_feature_edges(
+        boundary_edges=True, feature_edges=False, manifold_edges=False, non_manifold_edges=False
+    )
+    # Each profile starts on the axis; its free end sweeps the rim, the one open edge loop.
+    rim_height = np.asarray(patches[-1].control_points)[-1, 0, 2]
+    np.testing.assert_allclose(open_edges.points[:, 2], rim_height, atol=1e-12)
+    assert open_edges.n_cells == 4 * 5  # four quarter patches, 5 segments each
+
+
 def test_mesh_export_rejects_unknown_formats(tmp_path):
     with pytest.raises(ValueError, match="not supported"):
         io.export_mesh(tmp_path / "x.step", dn.NURBSSurface(np.zeros((2, 2, 3)), (1, 1)))

@@ -112,7 +112,9 @@ def tessellate(surfaces, samples=(24, 24)):
         raise ValueError("tessellate needs at least one surface")
     pieces = [viz.surface_mesh(surface, samples).extract_surface() for surface in surfaces]
     merged = pieces[0].merge(pieces[1:]) if len(pieces) > 1 else pieces[0]
-    return merged.triangulate().clean()
+    # Neighbouring patches evaluate their shared border separately, so the copies agree only
+    # to rounding: merge points closer than 1e-9 of the mesh's bounding-box diagonal.
+    return merged.triangulate().clean(tolerance=1e-9, absolute=False)
 
 
 def export_mesh(path, surfaces, samples=(24, 24)) -> None:

@@ -34,7 +34,19 @@ from ._frames import (
     kinematic_sweep as kinematic_sweep,
 )
 from ._halfedge import HalfEdgeMesh as HalfEdgeMesh, weld_vertices as weld_vertices
-from ._knots import clamped_knots as clamped_knots
+from ._interpolate import (
+    approximate as approximate,
+    approximate_surface as approximate_surface,
+    interpolate as interpolate,
+    interpolate_surface as interpolate_surface,
+)
+from ._knots import (
+    approximation_knots as approximation_knots,
+    averaged_knots as averaged_knots,
+    clamped_knots as clamped_knots,
+    parametrize as parametrize,
+    periodic_knots as periodic_knots,
+)
 from ._motion import extrude as extrude, revolve as revolve, sweep as sweep
 from ._objects import design_object as design_object, revolution_patches as revolution_patches
 from ._patches import (

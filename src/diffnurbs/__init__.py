@@ -1,5 +1,6 @@
 """Differentiable Bezier, B-spline and NURBS curves and surfaces in JAX."""
 
+from . import ph as ph
 from ._basis import (
     basis_funs as basis_funs,
     basis_matrix as basis_matrix,

@@ -292,7 +292,12 @@ def offset_curve(coeffs: ArrayLike, start: ArrayLike, distance: ArrayLike) -> NU
         raise ValueError(f"distance must be a scalar, got shape {distance.shape}")
     distance = check_finite(distance, "distance")
     alpha0, alpha1 = alphas(coeffs.astype(dtype))
-    alpha0 = _check_regular(alpha0, alpha1)
+    return _offset(_check_regular(alpha0, alpha1), alpha1, start, distance)
+
+
+@eqx.filter_jit
+def _offset(alpha0: Array, alpha1: Array, start: Array, distance: Array) -> NURBSCurve:
+    dtype = start.dtype
     # Ascending power coefficients of P(u), of P'(u) = w^2 and of sigma = |w|^2.
     curve = jnp.stack([to_complex(start), alpha0**2, alpha0 * alpha1, alpha1**2 / 3])
     hodograph = jnp.stack([alpha0**2, 2 * alpha0 * alpha1, alpha1**2, jnp.zeros_like(alpha0)])

@@ -291,6 +291,21 @@ def test_double_root_gives_one_solution():
     )
 
 
+def test_collinear_frame_gives_mirror_images_counter_clockwise_first():
+    # D = P_{k+1} - P_k parallel to s (P_{k+1} - P_{k-1}) with 4 D < s (P_{k+1} - P_{k-1}):
+    # the two curves are reflections of each other in the line, turning by +-253 degrees.
+    frame = ([0.0, 0.0], [1.9, 0.0], [2.0, 0.0])
+    newton, closed = ph.solve_cardinal(*frame), ph.solve_cardinal_closed_form(*frame)
+    for a, b in zip(newton, closed, strict=True):
+        np.testing.assert_allclose(a, b, atol=1e-12)
+    coeffs, p_next2 = (np.asarray(x) for x in newton)
+    np.testing.assert_allclose(coeffs[1], coeffs[0] * [1, 1, -1, -1], atol=1e-12)
+    np.testing.assert_allclose(p_next2[1], p_next2[0] * [1, -1], atol=1e-12)
+    assert p_next2[0, 1] < 0  # w turns counter-clockwise from w(0) = 1 ...
+    alpha0, beta = coeffs[0, 0] + 1j * coeffs[0, 2], coeffs[0, :2].sum() + 1j * coeffs[0, 2:].sum()
+    assert np.angle(beta / alpha0) > 0  # ... so the tangent w^2 turns counter-clockwise
+
+
 def test_solve_in_float32():
     points = [np.asarray(p, np.float32) for p in EXAMPLE2]
     coeffs, p_next2 = ph.solve_cardinal(*points)

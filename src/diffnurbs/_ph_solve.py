@@ -190,6 +190,15 @@ def turning(coeffs: Array) -> Array:
     return 2 * jnp.angle((alpha0 + alpha1) * jnp.conj(alpha0))
 
 
+def _order(turns: Array) -> Array:
+    """`[0, 1]` or `[1, 0]`: less absolute turning first; on a tie (to `sqrt(eps)`: the
+    mirror images of a collinear frame) the counter-clockwise one first."""
+    size = jnp.abs(turns)
+    tie = jnp.abs(size[0] - size[1]) <= _tolerance(turns.dtype) * (1 + jnp.max(size))
+    swap = jnp.where(tie, turns[1] > turns[0], size[1] < size[0])
+    return jnp.where(swap, jnp.array([1, 0]), jnp.array([0, 1]))
+
+
 @eqx.filter_jit
 def solve_pair(points: Array, s: Array, closed_form: bool = False):
     """Both solutions for the frame `points` (rows `P_{k-1}, P_k, P_{k+1}`), less turning
@@ -197,8 +206,7 @@ def solve_pair(points: Array, s: Array, closed_form: bool = False):
     two `P_{k+2}` relative to the size of the frame."""
     known, origin, scale = normalise(points)
     roots, gap, converged = (_closed_form_pair if closed_form else _newton_pair)(known, s)
-    order = jnp.argsort(jnp.abs(turning(roots[:, :4])))
-    roots = roots[order]
+    roots = roots[_order(turning(roots[:, :4]))]
     coeffs = canonical_sign(roots[:, :4]) * jnp.sqrt(scale)
     p_next2 = to_real(origin + scale * (roots[:, 4] + 1j * roots[:, 5]))
     return coeffs, p_next2, gap, converged
@@ -238,7 +246,8 @@ def solve_cardinal(
     `(coeffs, p_next2)`: `coeffs` of shape `(m, 4)`, rows `(a0, a1, b0, b1)` with the sign
     fixed by `a0 > 0` (or `a0 = 0`, `b0 >= 0`), and `p_next2` of shape `(m, 2)`, the point
     `P_{k+2}` of each. Ordered by the absolute turning `|2 arg(w(1) / w(0))|` of the
-    tangent, the flatter curve first. `m = 2`, or `m = 1` when the two agree to within
+    tangent, the flatter curve first; on a tie (the two mirror images of a collinear frame)
+    the counter-clockwise one first. `m = 2`, or `m = 1` when the two agree to within
     `eps^(1/3)` of the frame's size. Under `jit`/`vmap`/`grad` the shape must be static, so
     `m = 2` always (the rows are then equal at a double root).
     """

@@ -250,7 +250,7 @@ def _check_regular(alpha0: Array, alpha1: Array) -> Array:
     value = concrete(lowest)
     if value is None:
         return eqx.error_if(alpha0, lowest <= 0, "offset_curve needs a curve without cusps")
-    if not value > 1e-12 * concrete(scale):
+    if not value > np.finfo(value.dtype).eps * concrete(scale):
         raise ValueError(
             "offset_curve needs a regular PH cubic: its speed f^2 + v^2 vanishes at "
             f"u = {float(np.clip(concrete(vertex), 0, 1))} (a cusp, where the normal is undefined)"

@@ -15,8 +15,11 @@ Generically there are exactly two distinct curves. In terms of `beta = w(1)`:
 
 and the two curves coincide when `4 D = alpha0^2`, i.e. `4 (P_{k+1} - P_k) =
 s (P_{k+1} - P_{k-1})`. The two `beta` sum to `-alpha0`, which makes the two arc lengths
-equal (`L = (|alpha0|^2 + Re(alpha0 conj(beta)) + |beta|^2) / 3 = -Re(conj(beta_1) beta_2) / 3`
-for both): the two curves have the same length and differ in shape.
+equal: `L = (|alpha0|^2 + Re(alpha0 conj(beta)) + |beta|^2) / 3` and
+`Re(alpha0 conj(beta_1)) + |beta_1|^2 = Re(conj(beta_1) (alpha0 + beta_1)) =
+-Re(conj(beta_1) beta_2)`, symmetric in the two roots, so `L = (|alpha0|^2 -
+Re(conj(beta_1) beta_2)) / 3` for both: the two curves have the same length and differ
+in shape.
 
 `solve_cardinal` solves eq. 8 as the seed does, numerically: Newton's method (optimistix)
 from 16 starts, after moving `P_k` to the origin and scaling the points to unit size. The
@@ -147,7 +150,7 @@ def _newton_pair(known: Array, s: Array) -> tuple[Array, Array, Array]:
     def solve(start, args):
         return optx.root_find(eq8_residual, solver, start, args, throw=False).value
 
-    starts = _starts(known, s)
+    starts = _starts(*jax.lax.stop_gradient((known, s)))  # a start only picks a basin
     # Every start gets its own copy of the arguments: vmapping the implicit adjoint over
     # starts with shared (unbatched) arguments fails to transpose in optimistix/equinox.
     args = jax.tree.map(lambda x: jnp.broadcast_to(x, starts.shape[:1] + x.shape), (known, s))

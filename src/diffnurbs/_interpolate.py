@@ -9,6 +9,9 @@ system, so they must be concrete Python values. Checks that need values (coincid
 NaNs, parameters and knots that do not fit) run when the inputs are concrete.
 """
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
@@ -134,14 +137,20 @@ def interpolate(
             raise ValueError("end derivatives apply to open curves only, got closed=True")
         return _interpolate_closed(points, degree, parametrization)
     u = _parameters(points, parametrization)
-    derivatives = [
+    start, end = (
         None if d is None else _derivative(d, points.shape[1], name)
         for d, name in ((start_derivative, "start_derivative"), (end_derivative, "end_derivative"))
-    ]
-    if degree == 1 and any(d is not None for d in derivatives):
+    )
+    if degree == 1 and (start is not None or end is not None):
         raise ValueError("end derivatives need degree >= 2 (a polyline has no free tangent)")
+    control, knots = _open_interpolation(u, points, start, end, degree)
+    return NURBSCurve(control, degree, knots)
+
+
+@functools.partial(jax.jit, static_argnames="degree")
+def _open_interpolation(u, points, start, end, degree):
+    """`(control points, knots)` of the open interpolant, end derivatives optional."""
     sites, orders, rhs = [u], [np.zeros(points.shape[0], int)], [points]
-    start, end = derivatives
     if start is not None:  # the row C'(u_0) = D_0 goes second, next to C(u_0) = Q_0
         sites = [u[:1], u[:1], u[1:]]
         orders = [np.zeros(1, int), np.ones(1, int), orders[0][1:]]
@@ -153,7 +162,7 @@ def interpolate(
     sites, orders, rhs = jnp.concatenate(sites), np.concatenate(orders), jnp.concatenate(rhs)
     # A derivative condition counts as one more site at its end (eq. 9.21-9.22).
     knots = averaged_knots(sites, degree)
-    return NURBSCurve(collocation_solve(sites, orders, knots, degree, rhs), degree, knots)
+    return collocation_solve(sites, orders, knots, degree, rhs), knots
 
 
 def _derivative(value: ArrayLike, dim: int, name: str) -> Array:
@@ -172,16 +181,23 @@ def _interpolate_closed(points: Array, degree: int, parametrization) -> NURBSCur
             "closed=True takes the points without repeating the first at the end; "
             "drop the last point"
         )
-    m = points.shape[0]
     u = _parameters(points, parametrization, closed=True)
+    control, knots = _closed_interpolation(u, points, degree)
+    return NURBSCurve(control, degree, knots)
+
+
+@functools.partial(jax.jit, static_argnames="degree")
+def _closed_interpolation(u, points, degree):
+    m = points.shape[0]
     knots = periodic_knots(u, degree)
     matrix = basis_matrix(knots, degree, u[:-1])
     # Control points m .. m+p-1 are control points 0 .. p-1 again: fold their columns.
     matrix = matrix[:, :m].at[:, :degree].add(matrix[:, m:])
     control = jnp.linalg.solve(matrix, points)
-    return NURBSCurve(jnp.concatenate([control, control[:degree]]), degree, knots)
+    return jnp.concatenate([control, control[:degree]]), knots
 
 
+@functools.partial(jax.jit, static_argnames=("degree", "interpolate_ends"))
 def least_squares(
     u: Array,
     points: Array,
@@ -210,7 +226,11 @@ def least_squares(
         identity = jnp.zeros(2 * degree + 1, band.dtype).at[degree].set(1.0)
         band = band.at[0].set(identity).at[-1].set(identity)
         rhs = rhs.at[0].set(points[0]).at[-1].set(points[-1])
-    control = solve_banded(band, rhs)
+    return solve_banded(band, rhs)
+
+
+def check_solved(control: Array) -> Array:
+    """Raise when concrete least-squares control points are not finite (a singular system)."""
     values = concrete(control)
     if values is not None and not np.all(np.isfinite(values)):
         raise ValueError(
@@ -268,7 +288,7 @@ def approximate(
     if weights is not None:
         weights = _point_weights(weights, points.shape[0])
     control = least_squares(u, points, knots, degree, weights, interpolate_ends)
-    return NURBSCurve(control, degree, knots)
+    return NURBSCurve(check_solved(control), degree, knots)
 
 
 def _check_knots_fit(knots: Array, degree: int, u: Array, interpolate_ends: bool) -> None:
@@ -313,15 +333,20 @@ def _grid(points_grid: ArrayLike, degrees: tuple[int, int]) -> Array:
 def grid_parameters(grid: Array, method: str) -> tuple[Array, Array]:
     """Parameters `(u, v)` of a grid of points (NURBS Book A9.3): each row's parameters
     averaged over the rows; rows of zero length (a pole) are left out of the average."""
-    method = check_parametrization(method)
+    params = _grid_parameters(grid, check_parametrization(method))
+    for u, axis in zip(params, "uv", strict=True):
+        check_distinct_parameters(u, f"grid lines along {axis} at positions")
+    return params
+
+
+@functools.partial(jax.jit, static_argnames="method")
+def _grid_parameters(grid: Array, method: str) -> tuple[Array, Array]:
     params = []
     for lines in (jnp.swapaxes(grid, 0, 1), grid):  # lines along u, then along v
         u, total = normalized_cumsum(chord_steps(lines, method))
         used = (total > 0)[:, None]
         count = jnp.maximum(jnp.sum(used), 1)
         params.append(jnp.sum(jnp.where(used, u, 0.0), axis=0) / count)
-    for u, axis in zip(params, "uv", strict=True):
-        check_distinct_parameters(u, f"grid lines along {axis} at positions")
     return params[0], params[1]
 
 
@@ -357,17 +382,20 @@ def interpolate_surface(
     """
     degrees = (check_degree(degree_u, name="degree_u"), check_degree(degree_v, name="degree_v"))
     grid = _grid(points_grid, degrees)
-    params = grid_parameters(grid, parametrization)
-    knots = [averaged_knots(u, d) for u, d in zip(params, degrees, strict=True)]
+    control, knots = _interpolated_net(grid, grid_parameters(grid, parametrization), degrees)
+    return NURBSSurface(control, degrees, knots)
+
+
+@functools.partial(jax.jit, static_argnames="degrees")
+def _interpolated_net(grid, params, degrees):
+    knots = tuple(averaged_knots(u, d) for u, d in zip(params, degrees, strict=True))
 
     def solver(u, knots, degree):
         orders = np.zeros(u.shape[0], int)
         return lambda rhs: collocation_solve(u, orders, knots, degree, rhs)
 
-    control = _along_both(
-        grid, *(solver(*args) for args in zip(params, knots, degrees, strict=True))
-    )
-    return NURBSSurface(control, degrees, tuple(knots))
+    solvers = (solver(*args) for args in zip(params, knots, degrees, strict=True))
+    return _along_both(grid, *solvers), knots
 
 
 def approximate_surface(
@@ -411,12 +439,18 @@ def approximate_surface(
                 f"({size}), got {count}"
             )
     params = grid_parameters(grid, parametrization)
-    knots = [approximation_knots(u, n, d) for u, n, d in zip(params, counts, degrees, strict=True)]
+    control, knots = _approximated_net(grid, params, counts, degrees, interpolate_ends)
+    return NURBSSurface(check_solved(control), degrees, knots)
+
+
+@functools.partial(jax.jit, static_argnames=("counts", "degrees", "interpolate_ends"))
+def _approximated_net(grid, params, counts, degrees, interpolate_ends):
+    knots = tuple(
+        approximation_knots(u, n, d) for u, n, d in zip(params, counts, degrees, strict=True)
+    )
 
     def solver(u, knots, degree):
         return lambda rhs: least_squares(u, rhs, knots, degree, None, interpolate_ends)
 
-    control = _along_both(
-        grid, *(solver(*args) for args in zip(params, knots, degrees, strict=True))
-    )
-    return NURBSSurface(control, degrees, tuple(knots))
+    solvers = (solver(*args) for args in zip(params, knots, degrees, strict=True))
+    return _along_both(grid, *solvers), knots

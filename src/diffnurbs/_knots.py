@@ -1,5 +1,8 @@
 """Knot vectors and the parameters of data points."""
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -108,13 +111,19 @@ def parametrize(
     points = jnp.asarray(points)
     check_rank(points, 2, "points", "(n_points, dim)")
     points = points.astype(float_dtype(points))
-    if closed:
-        points = jnp.concatenate([points, points[:1]])
-    u, _ = normalized_cumsum(chord_steps(points, method))
+    u = _parameters_of(points, method, closed)
     check_distinct_parameters(u)
     return u
 
 
+@functools.partial(jax.jit, static_argnames=("method", "closed"))
+def _parameters_of(points: Array, method: str, closed: bool) -> Array:
+    if closed:
+        points = jnp.concatenate([points, points[:1]])
+    return normalized_cumsum(chord_steps(points, method))[0]
+
+
+@functools.partial(jax.jit, static_argnames="degree")
 def averaged_knots(u: ArrayLike, degree: int) -> Float[Array, " m+p+1"]:
     """Clamped knots by averaging `degree` consecutive parameters (NURBS Book eq. 9.8).
 
@@ -142,6 +151,7 @@ def averaged_knots(u: ArrayLike, degree: int) -> Float[Array, " m+p+1"]:
     )
 
 
+@functools.partial(jax.jit, static_argnames=("n_control", "degree"))
 def approximation_knots(u: ArrayLike, n_control: int, degree: int) -> Float[Array, " n+p+1"]:
     """Clamped knots for a least-squares fit of `n_control` points to data at parameters `u`
     (NURBS Book eq. 9.68-9.69).
@@ -177,6 +187,7 @@ def approximation_knots(u: ArrayLike, n_control: int, degree: int) -> Float[Arra
     )
 
 
+@functools.partial(jax.jit, static_argnames="degree")
 def periodic_knots(u: ArrayLike, degree: int) -> Float[Array, " m+2p+1"]:
     """Unclamped knots for a closed curve through points at parameters `u_0 < ... < u_m`
     (`u_m` is the first point again), with domain `[u_0, u_m]`.

@@ -63,7 +63,9 @@ def cardinal_chain(
     """March a PH cardinal spline from three points, one inverse problem per segment.
 
     Segment 0 solves `solve_cardinal(P0, P1, P2)`; its `P3` is fixed by the chosen solution,
-    and segment `j` then solves the frame `(P_j, P_{j+1}, P_{j+2})`. Consecutive segments of
+    and segment `j` then solves the frame `(P_j, P_{j+1}, P_{j+2})` (Newton, as
+    `solve_cardinal`). The spline runs from `P1` to `P_{n+1}`: `P0` only sets the first
+    tangent `s (P2 - P0)`, and the last point `P_{n+2}` the last one. Consecutive segments of
     a cardinal spline share the tangent at their joint, so the chain is C1 and PH throughout.
 
     **Arguments:**

@@ -54,7 +54,9 @@ def _bernstein_quadratic(w: Array, t: Array) -> tuple[Array, Array]:
 
 def _bending_energy(w: Array) -> Array:
     """`int kappa^2 ds = 4 int_0^1 Im(conj(w) w')^2 / |w|^6 dt`: for `r' = w^2`,
-    `kappa = 2 Im(conj(w) w') / |w|^4` and `ds = |w|^2 dt`. Infinite at a cusp."""
+    `kappa = 2 Im(conj(w) w') / |w|^4` and `ds = |w|^2 dt`. An interpolant with a cusp
+    (`w = 0` inside) has infinite energy: the quadrature then gives a huge value (`inf` if a
+    node falls on the zero), so it is never the `best`."""
 
     def integrand(t):
         value, slope = _bernstein_quadratic(w, t)

@@ -66,13 +66,18 @@ def _check_inputs(f, a, b, tol, max_degree):
 
 def _values(f: Callable, t: Array, what: str = "f") -> Array:
     """`f` at every `t`, as one compiled vectorised call; NaN or inf raise `ValueError`."""
-    values = jax.jit(jax.vmap(f))(t)
+    values = _vmapped(f, t)
     if values.shape != t.shape:
         raise ValueError(
             f"{what} must map a scalar to a scalar, got shape {values.shape[1:]} per point"
         )
     _check_finite_values(values, t, what)
     return values
+
+
+@functools.partial(jax.jit, static_argnums=0)
+def _vmapped(f, t):
+    return jax.vmap(f)(t)
 
 
 def _check_finite_values(values, t, what="f"):

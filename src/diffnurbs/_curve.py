@@ -7,6 +7,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs, find_span
+from ._inversion import curve_closest_point
 from ._knotops import (
     bezier_knots,
     bezier_segments,
@@ -296,3 +297,27 @@ class NURBSCurve(AbstractRationalSpline):
             return safe_norm(self._derivatives(u, 1)[..., 1, :])
 
         return integrate_panels(speed, breaks[:-1], breaks[1:])
+
+    def closest_point(
+        self, point: ArrayLike, samples_per_span: int | None = None
+    ) -> Float[Array, "..."]:
+        """Point inversion: the parameter `u` of the point `C(u)` nearest to `point`.
+
+        Every query starts from the nearest of a polyline through `samples_per_span`
+        points per knot span (default `2 (p + 1)`; near-ties, as across the seam of a
+        closed curve, start from both candidates), then a projected Newton method on
+        `|C(u) - P|^2` converges inside the domain; an end is the answer where the
+        distance still falls beyond it. `jax.grad` of the result reaches the points and
+        the curve (implicit function theorem). See `_inversion`.
+
+        **Arguments:**
+
+        - `point`: array of shape `(..., dim)`: one point or many.
+        - `samples_per_span`: samples per knot span for the start; raise it for curves
+          whose spans wind back and forth.
+
+        **Returns:**
+
+        Parameters of shape `point.shape[:-1]`, in the domain.
+        """
+        return curve_closest_point(self, point, samples_per_span)

@@ -6,6 +6,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, dense_basis, ders_basis_funs
 from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
+from ._inversion import surface_closest_point
 from ._knotops import (
     bezier_knots,
     bezier_segments,
@@ -276,3 +277,27 @@ class NURBSSurface(AbstractRationalSpline):
         noise = 64 * jnp.finfo(cross.dtype).eps * scale
         degenerate = (safe_norm(cross) <= noise)[..., None]
         return jnp.where(degenerate, 0.0, safe_normalize(cross))
+
+    def closest_point(
+        self, point: ArrayLike, samples_per_span: int | None = None
+    ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
+        """Point inversion: the parameters `(u, v)` of the point `S(u, v)` nearest to `point`.
+
+        Every query starts from the nearest segment of the grid lines through
+        `samples_per_span` samples per knot span in each direction (default `p + 2` and
+        `q + 2`; near-ties, as across a seam, start from both candidates), then a
+        projected Newton method on `|S(u, v) - P|^2` converges inside the domain: on an
+        edge or at a corner where the distance still falls beyond it. `jax.grad` of the
+        result reaches the points and the surface. See `_inversion`.
+
+        **Arguments:**
+
+        - `point`: array of shape `(..., dim)`: one point or many.
+        - `samples_per_span`: samples per knot span in each direction for the start.
+
+        **Returns:**
+
+        A pair `(u, v)` of arrays of shape `point.shape[:-1]`, so that
+        `surface(*surface.closest_point(point))` is the nearest point.
+        """
+        return surface_closest_point(self, point, samples_per_span)

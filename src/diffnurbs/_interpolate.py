@@ -127,7 +127,9 @@ def interpolate(
 
     **Returns:**
 
-    A non-rational `NURBSCurve` with `C(u_k) = Q_k`.
+    A non-rational `NURBSCurve` with `C(u_k) = Q_k`. Works on traced points, derivatives
+    and parameters (inside `jit` or `grad`); `degree`, `closed`, a method name and whether
+    each derivative is given must be concrete.
     """
     degree = check_degree(degree)
     points = _data_points(points)
@@ -270,7 +272,9 @@ def approximate(
 
     **Returns:**
 
-    A non-rational `NURBSCurve`.
+    A non-rational `NURBSCurve`. Works on traced points, parameters, weights and knots;
+    `n_control`, `degree`, `interpolate_ends`, a method name and whether `weights` and
+    `knots` are given must be concrete.
     """
     degree = check_degree(degree)
     points = _data_points(points)

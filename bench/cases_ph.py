@@ -36,7 +36,7 @@ def inverse_problem_case(rng: np.random.Generator, count: int = TRIPLES) -> Case
     closed_form = jax.jit(jax.vmap(ph.solve_cardinal_closed_form))
     reference = _stacked(closed_form(*args))
     return Case(
-        f"6. PH inverse problem (seed 004, eq. 8), vmapped over {count:,} point triples (solves/s)",
+        f"11. PH inverse problem (seed 004, eq. 8), vmapped, {count:,} triples (solves/s)",
         {
             "diffnurbs": Impl(lambda: _ready(solve(*args)), count, reference, _stacked),
             "scipy": "no PH curves",

@@ -17,6 +17,10 @@ import time  # noqa: E402
 from importlib.metadata import version  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+import cases_fit  # noqa: E402
+import cases_geometry  # noqa: E402
+import cases_ph  # noqa: E402
+import numpy as np  # noqa: E402
 from cases import LIBRARIES, Case, Impl, all_cases, discrepancy  # noqa: E402
 from timing import best_times  # noqa: E402
 
@@ -37,6 +41,8 @@ SIZES = {
     "geomdl_derivatives": 1000,
     "geomdl_surface": 1000,
 }
+# Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-).
+TOPIC_CASES = (cases_geometry, cases_ph, cases_fit)
 RESULTS = Path(__file__).parent / "results" / "latest.md"
 
 
@@ -141,6 +147,8 @@ def main() -> int:
     print("\n".join(header), flush=True)
     started = time.perf_counter()
     cases = all_cases(SEED, SIZES)
+    for module in TOPIC_CASES:
+        cases += module.cases(np.random.default_rng(SEED))
 
     columns = ["case", "diffnurbs pts/s"]
     for library in LIBRARIES[1:]:

@@ -146,3 +146,13 @@ def test_basis_matrix_matches_the_recursion():
 def test_basis_matrix_rejects_a_grid():
     with pytest.raises(ValueError, match="1-D array"):
         dn.basis_matrix(jnp.asarray([0.0, 0, 1, 1]), 1, jnp.zeros((2, 2)))
+
+
+def test_domain_end_repeated_inside_an_unclamped_knot_vector():
+    # The domain [0, 3] ends at a triple knot followed by more knots: u = 3 belongs to the
+    # last non-empty span [2, 3), not to the empty [3, 3).
+    knots = jnp.asarray([-3.0, -2, -1, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 5, 6])
+    assert int(dn.find_span(knots, 3, 3.0)) == 11
+    points = np.random.default_rng(0).normal(size=(14, 2))
+    curve = dn.NURBSCurve(points, 3, knots)
+    np.testing.assert_allclose(curve(3.0), points[11], atol=1e-14)

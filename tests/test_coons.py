@@ -51,11 +51,12 @@ def _random_curve(start, end, n, degree, domain, rational):
     return dn.NURBSCurve(points, degree, knots, weights)
 
 
-def _random_boundary():
+def _random_boundary(rational=True):
+    """Curves of mixed degrees and domains; `c0` and `d0` rational unless told otherwise."""
     p00, p10, p01, p11 = CORNERS
-    c0 = _random_curve(p00, p10, 6, 3, (2.0, 5.0), True)
+    c0 = _random_curve(p00, p10, 6, 3, (2.0, 5.0), rational)
     c1 = _random_curve(p01, p11, 4, 2, (-1.0, 0.5), False)
-    d0 = _random_curve(p00, p01, 5, 2, (0.0, 1.0), True)
+    d0 = _random_curve(p00, p01, 5, 2, (0.0, 1.0), rational)
     d1 = _random_curve(p10, p11, 7, 4, (3.0, 3.25), False)
     return c0, c1, d0, d1
 
@@ -219,11 +220,7 @@ def test_coons_errors():
 
 
 def test_to_nurbs_is_the_same_patch():
-    p00, p10, p01, p11 = CORNERS
-    c0 = _random_curve(p00, p10, 6, 3, (2.0, 5.0), False)
-    c1 = _random_curve(p01, p11, 4, 2, (-1.0, 0.5), False)
-    d0 = _random_curve(p00, p01, 5, 2, (0.0, 1.0), False)
-    d1 = _random_curve(p10, p11, 7, 4, (3.0, 3.25), False)
+    c0, c1, d0, d1 = _random_boundary(rational=False)
     patch = coons(c0, c1, d0, d1)
     surface = patch.to_nurbs()
     assert isinstance(surface, dn.NURBSSurface)

@@ -42,6 +42,8 @@ def test_surface_insertion_and_decomposition(direction):
     u, v = rng.uniform(size=100), rng.uniform(size=100)
     inserted = surface.insert_knot(0.61, direction, times=2)
     np.testing.assert_allclose(inserted(u, v), surface(u, v), atol=1e-12)
+    refined = surface.refine([0.2, 0.2, 0.9], direction)
+    np.testing.assert_allclose(refined(u, v), surface(u, v), atol=1e-12)
     for row in surface.decompose():
         for patch in row:
             (a, b), (c, d) = patch.domain
@@ -138,3 +140,53 @@ def test_degree_elevation_rejects_bad_times():
         curve.elevate_degree(0)
     with pytest.raises(ValueError, match="direction"):
         dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).elevate_degree(1, "w")
+
+
+def geomdl_insert_all(degree, knots, points, values):
+    """geomdl's A5.1, one knot after another: the oracle for refinement."""
+    from geomdl import helpers
+
+    knots, points = list(knots), np.asarray(points).tolist()
+    for u in values:
+        span = helpers.find_span_linear(degree, knots, len(points), u)
+        points = helpers.knot_insertion(degree, knots, points, u, span=span)
+        knots = helpers.knot_insertion_kv(knots, u, span, 1)
+    return np.asarray(points), np.asarray(knots)
+
+
+def test_refinement_with_a_thousand_knots_matches_geomdl():
+    rng = np.random.default_rng(11)
+    curve = random_curve(rng, 3, n_control=12, dim=2, rational=False)
+    values = rng.uniform(0.0, 1.0, 1000)
+    refined = curve.refine(values)
+    assert refined.control_points.shape == (1012, 2)
+    u = np.linspace(0, 1, 2001)
+    np.testing.assert_allclose(refined(u), curve(u), atol=1e-12)
+    points, knots = geomdl_insert_all(3, curve.knots.tolist(), curve.control_points, values[:60])
+    partial = curve.refine(values[:60])
+    np.testing.assert_allclose(partial.knots, knots, atol=1e-15)
+    np.testing.assert_allclose(partial.control_points, points, atol=1e-12)
+
+
+def test_refinement_is_differentiable_in_the_inserted_values():
+    curve = random_curve(np.random.default_rng(12), 3, n_control=8, dim=2, rational=False)
+
+    def polygon_length(values):
+        points = curve.refine(values).control_points
+        return jnp.sum(jnp.linalg.norm(jnp.diff(points, axis=0), axis=1))
+
+    values = jnp.asarray([0.21, 0.55, 0.8])
+    grad = jax.grad(polygon_length)(values)
+    step = 1e-6
+    for k in range(3):
+        shift = jnp.zeros(3).at[k].set(step)
+        fd = (polygon_length(values + shift) - polygon_length(values - shift)) / (2 * step)
+        np.testing.assert_allclose(grad[k], fd, rtol=1e-6)
+
+
+def test_refinement_rejects_too_many_copies_and_values_outside():
+    curve = random_curve(np.random.default_rng(13), 2, n_control=6, dim=2)
+    with pytest.raises(ValueError, match="insert it at most 2 times, not 3"):
+        curve.refine([0.5, 0.5, 0.5])
+    with pytest.raises(ValueError, match="must lie in the domain"):
+        curve.refine([0.5, 1.5])

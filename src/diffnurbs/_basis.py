@@ -41,7 +41,10 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
 
     def bisect(i, span):
         candidate = span + jnp.left_shift(1, steps - 1 - i)
-        inside = (candidate <= last) & (knots[jnp.minimum(candidate, last)] <= u)
+        start = knots[jnp.minimum(candidate, last)]
+        # `start < knots[last + 1]`: at and beyond the domain's end, the last non-empty span
+        # (the end knot may be repeated inside an unclamped knot vector).
+        inside = (candidate <= last) & (start <= u) & (start < knots[last + 1])
         return jnp.where(inside, candidate, span)
 
     return jax.lax.fori_loop(0, steps, bisect, jnp.full(u.shape, degree, dtype=jnp.int32))

@@ -20,7 +20,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ._curve import NURBSCurve, clamp_to_domain, safe_norm
 from ._knotops import greville, merged_knots, missing_knots
 from ._surface import NURBSSurface
-from ._validate import check_parameter, check_rank, concrete, float_dtype
+from ._validate import check_grid_axes, check_parameter, check_rank, concrete, float_dtype
 
 
 def bilinear_patch(p00: ArrayLike, p10: ArrayLike, p01: ArrayLike, p11: ArrayLike) -> NURBSSurface:
@@ -180,8 +180,7 @@ class CoonsPatch(eqx.Module):
         Each boundary curve is evaluated once per grid line, not once per point.
         """
         us, vs = self._parameters(us, vs)
-        check_rank(us, 1, "us", "(a 1-D array of u values)")
-        check_rank(vs, 1, "vs", "(a 1-D array of v values)")
+        check_grid_axes(us, vs)
         return self._grid(us, vs)
 
     @eqx.filter_jit

@@ -21,7 +21,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._curve import NURBSCurve
-from ._patches import cubic_basis_matrix
+from ._patches import basis_or_matrix, cubic_basis_matrix
 from ._validate import check_parameter, check_rank, concrete, float_dtype
 
 HERMITE_MATRIX = np.array(
@@ -73,12 +73,7 @@ def matrix_segment(
     check_rank(geometry, 2, "geometry", "(4, dim)")
     if geometry.shape[0] != 4:
         raise ValueError(f"geometry must have shape (4, dim), got {geometry.shape}")
-    if isinstance(basis, str):
-        matrix = cubic_matrix(basis, geometry.dtype)
-    else:
-        matrix = jnp.asarray(basis, dtype=geometry.dtype)
-        if matrix.shape != (4, 4):
-            raise ValueError(f"a basis matrix must have shape (4, 4), got {matrix.shape}")
+    matrix = basis_or_matrix(basis, geometry.dtype, named=cubic_matrix)
     t = jnp.asarray(t, dtype=geometry.dtype)
     check_parameter(t, 0.0, 1.0, "t")
     powers = jnp.stack([t**3, t**2, t, jnp.ones_like(t)], axis=-1)

@@ -12,6 +12,7 @@ from ._knotops import (
     bezier_knots,
     bezier_segments,
     check_insertion,
+    check_refinement,
     elevate,
     insert,
     span_breaks,
@@ -152,11 +153,12 @@ class NURBSCurve(AbstractRationalSpline):
         return self._from_homogeneous_points(points, knots)
 
     def refine(self, values: ArrayLike) -> "NURBSCurve":
-        """The same curve with every knot of `values` inserted (knot refinement)."""
-        curve = self
-        for u in jnp.asarray(values, dtype=self.knots.dtype).ravel():
-            curve = curve.insert_knot(u)
-        return curve
+        """The same curve with every knot of `values` inserted (knot refinement, one
+        vectorised pass; see `_knotops.insert`). Values may be traced (checks then skipped)."""
+        values = jnp.ravel(jnp.asarray(values, dtype=self.knots.dtype))
+        check_refinement(self.knots, self.degree, values)
+        points, knots = insert(self.homogeneous_points(), self.knots, self.degree, values)
+        return self._from_homogeneous_points(points, knots)
 
     def elevate_degree(self, times: int = 1) -> "NURBSCurve":
         """The same curve with its degree raised by `times` (every knot `times` more often).

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
 from ._curve import NURBSCurve, safe_norm, safe_normalize
-from ._validate import check_rank
+from ._validate import check_grid_axes
 
 FRAME_KINDS = ("rmf", "frenet")
 
@@ -247,8 +247,7 @@ class KinematicSweep(eqx.Module):
         The profile and the frames are evaluated once per `u` and once per `v`.
         """
         us, vs = jnp.asarray(us), jnp.asarray(vs)
-        check_rank(us, 1, "us", "(a 1-D array of u values)")
-        check_rank(vs, 1, "vs", "(a 1-D array of v values)")
+        check_grid_axes(us, vs)
         local = self._local(us)
         frame = frames(self.path, vs, self.frame)
         return self.path(vs)[None] + jnp.einsum("ik,jkd->ijd", local, frame)

@@ -247,7 +247,7 @@ def weld_vertices(points: ArrayLike, faces, tolerance: float = 1e-9):
         raise ValueError(f"tolerance must be positive, got {tolerance}")
     flat, start = _flatten_faces(faces, len(points))
     radius = tolerance * max(float(np.linalg.norm(np.ptp(points, axis=0))), np.finfo(float).tiny)
-    label = _merge_labels(points, radius)
+    label = merge_labels(points, radius)
     merged = label[flat]
     kept_faces = []
     for face in np.split(merged, start[1:-1]):
@@ -262,29 +262,19 @@ def weld_vertices(points: ArrayLike, faces, tolerance: float = 1e-9):
     return points[used], np.split(inverse.astype(np.int64), offsets)
 
 
-def _merge_labels(points, radius):
-    """For every point the smallest index of the cluster of points chained within `radius`."""
-    # Candidate pairs are close in their projection on a generic direction; sweep over the
-    # sorted projections with growing index shifts (vectorised over all points).
-    direction = np.resize([1.0, np.sqrt(2.0), np.sqrt(3.0)], points.shape[1])
-    projection = points @ (direction / np.linalg.norm(direction))
-    order = np.argsort(projection)
-    sorted_projection = projection[order]
-    reach = np.searchsorted(sorted_projection, sorted_projection + radius, side="right")
-    widest = int(np.max(reach - np.arange(len(points))))
-    pairs = []
-    for shift in range(1, widest):
-        a, b = order[:-shift], order[shift:]
-        close = np.linalg.norm(points[a] - points[b], axis=1) <= radius
-        pairs.append(np.stack([a[close], b[close]], axis=1))
-    pairs = np.concatenate(pairs) if pairs else np.zeros((0, 2), dtype=np.int64)
-    label = np.arange(len(points))
-    while True:  # propagate the smallest label along the pairs until nothing changes
-        smallest = np.minimum(label[pairs[:, 0]], label[pairs[:, 1]])
-        updated = label.copy()
-        np.minimum.at(updated, pairs[:, 0], smallest)
-        np.minimum.at(updated, pairs[:, 1], smallest)
-        updated = updated[updated]
-        if np.array_equal(updated, label):
-            return label
-        label = updated
+def merge_labels(points, radius):
+    """For every point the smallest index of the cluster of points chained within `radius`.
+
+    A k-d tree finds the close pairs and the clusters are the connected components of the
+    graph they form: `O(V log V)`, about a second for a million points.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(points).query_pairs(radius, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), (len(points),) * 2)
+    _, component = connected_components(graph, directed=False)
+    smallest = np.full(component.max() + 1, len(points))
+    np.minimum.at(smallest, component, np.arange(len(points)))
+    return smallest[component]

@@ -63,6 +63,16 @@ def cubic_basis_matrix(kind: str, dtype=None) -> Float[Array, "4 4"]:
     return jnp.asarray(_BASES[kind.lower()], dtype=dtype or jnp.result_type(float))
 
 
+def basis_or_matrix(basis, dtype, named=cubic_basis_matrix) -> Float[Array, "4 4"]:
+    """The matrix `named(basis, dtype)` when `basis` is a name, else `basis` as a `(4, 4)` array."""
+    if isinstance(basis, str):
+        return named(basis, dtype)
+    matrix = jnp.asarray(basis, dtype=dtype)
+    if matrix.shape != (4, 4):
+        raise ValueError(f"a basis matrix must have shape (4, 4), got {matrix.shape}")
+    return matrix
+
+
 def _power_row(t):
     return jnp.stack([t**3, t**2, t, jnp.ones_like(t)], axis=-1)
 
@@ -91,12 +101,7 @@ def bicubic_patch(
     check_rank(geometry, 3, "geometry", "(4, 4, dim)")
     if geometry.shape[:2] != (4, 4):
         raise ValueError(f"geometry must have shape (4, 4, dim), got {geometry.shape}")
-    if isinstance(basis, str):
-        matrix = cubic_basis_matrix(basis, geometry.dtype)
-    else:
-        matrix = jnp.asarray(basis, dtype=geometry.dtype)
-        if matrix.shape != (4, 4):
-            raise ValueError(f"a basis matrix must have shape (4, 4), got {matrix.shape}")
+    matrix = basis_or_matrix(basis, geometry.dtype)
     u, v = jnp.broadcast_arrays(jnp.asarray(u, geometry.dtype), jnp.asarray(v, geometry.dtype))
     check_parameter(u, 0.0, 1.0, "u")
     check_parameter(v, 0.0, 1.0, "v")

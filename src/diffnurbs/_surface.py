@@ -11,6 +11,7 @@ from ._knotops import (
     bezier_knots,
     bezier_segments,
     check_insertion,
+    check_refinement,
     elevate,
     insert,
     span_breaks,
@@ -21,6 +22,7 @@ from ._validate import (
     check_control_count,
     check_degree,
     check_finite,
+    check_grid_axes,
     check_knots,
     check_order,
     check_parameter,
@@ -141,6 +143,16 @@ class NURBSSurface(AbstractRationalSpline):
 
         return self._along(direction, operation)
 
+    def refine(self, values: ArrayLike, direction: str = "u") -> "NURBSSurface":
+        """The same surface with every knot of `values` inserted along `direction`."""
+
+        def operation(points, knots, degree):
+            flat = jnp.ravel(jnp.asarray(values, dtype=knots.dtype))
+            check_refinement(knots, degree, flat)
+            return insert(points, knots, degree, flat)
+
+        return self._along(direction, operation)
+
     def elevate_degree(self, times: int = 1, direction: str = "u") -> "NURBSSurface":
         """The same surface with its degree along `direction` raised by `times`
         (see `NURBSCurve.elevate_degree`)."""
@@ -219,8 +231,7 @@ class NURBSSurface(AbstractRationalSpline):
         `p + 1` non-zeros per row (gathers) when it is large.
         """
         us, vs = self._parameters(us, vs)
-        check_rank(us, 1, "us", "(a 1-D array of u values)")
-        check_rank(vs, 1, "vs", "(a 1-D array of v values)")
+        check_grid_axes(us, vs)
         return self._grid(us, vs)
 
     @eqx.filter_jit

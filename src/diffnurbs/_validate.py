@@ -38,6 +38,12 @@ def check_rank(x, ndim, name, layout):
         raise ValueError(f"{name} must have {ndim} dimensions {layout}, got shape {x.shape}")
 
 
+def check_grid_axes(us, vs):
+    """The two axes of a tensor grid are 1-D arrays of parameters."""
+    check_rank(us, 1, "us", "(a 1-D array of u values)")
+    check_rank(vs, 1, "vs", "(a 1-D array of v values)")
+
+
 def check_finite(x, name):
     values = concrete(x)
     if values is None:

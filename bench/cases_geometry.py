@@ -1,0 +1,151 @@
+"""Benchmark cases of the geometry toolkit: a surface of revolution evaluated and
+tessellated to 10^6 points, a kinematic sweep on a 500 x 500 grid, knot refinement with
+10^3 knots.
+
+splipy revolves and refines too and geomdl refines, so those are timed side by side and
+their results compared with diffnurbs's; the tessellation (a pyvista mesh) and the
+kinematic sweep (rotation-minimising frame) exist in diffnurbs only.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import splipy
+import splipy.surface_factory
+from cases import Case, Impl
+from geomdl import helpers
+
+import diffnurbs as dn
+from diffnurbs import io
+
+SIDE = 1000  # revolve: SIDE x SIDE points
+SWEEP_SIDE = 500
+REFINE_KNOTS = 1000
+GEOMDL_KNOTS = 100  # pure Python: the first knots only
+
+
+def _ready(x):
+    return jax.block_until_ready(x)
+
+
+def _profile(rng: np.random.Generator, n: int = 12, p: int = 3) -> dn.NURBSCurve:
+    """A cubic profile in the xz half-plane x > 0, with clamped random interior knots."""
+    heights = np.sort(rng.uniform(0.0, 3.0, n))
+    points = np.stack([rng.uniform(0.5, 2.0, n), np.zeros(n), heights], axis=1)
+    interior = np.sort(rng.uniform(0.0, 1.0, n - p - 1))
+    return dn.NURBSCurve(points, p, np.r_[[0.0] * (p + 1), interior, [1.0] * (p + 1)])
+
+
+def revolve_case(rng: np.random.Generator) -> Case:
+    profile = _profile(rng)
+    us = jnp.linspace(0.0, 1.0, SIDE)
+    vs = jnp.linspace(0.0, 1.0, SIDE)
+    revolve_grid = jax.jit(
+        lambda c: dn.revolve(c, jnp.zeros(3), jnp.asarray([0.0, 0, 1])).grid(us, vs)
+    )
+    reference = np.asarray(revolve_grid(profile))
+    basis = splipy.BSplineBasis(profile.degree + 1, np.asarray(profile.knots))
+
+    def splipy_revolve():
+        curve = splipy.Curve(basis, np.asarray(profile.control_points))
+        surface = splipy.surface_factory.revolve(curve)
+        return surface(np.array(us), 2 * math.pi * np.array(vs))  # splipy snaps in place
+
+    return Case(
+        f"7. revolve a cubic profile (12 points) + evaluate {SIDE}x{SIDE} grid",
+        {
+            "diffnurbs": Impl(lambda: _ready(revolve_grid(profile)), SIDE * SIDE, reference),
+            "scipy": "no revolve",
+            "splipy": Impl(splipy_revolve, SIDE * SIDE, reference),
+            "geomdl": "no revolve",
+        },
+        {"splipy": 1},
+    )
+
+
+def tessellate_case(rng: np.random.Generator) -> Case:
+    surface = dn.revolve(_profile(rng), [0.0, 0, 0], [0.0, 0, 1])
+
+    def mesh_points():
+        return np.asarray(io.tessellate(surface, (SIDE, SIDE)).points)
+
+    reference = mesh_points()
+    return Case(
+        f"8. tessellate a surface of revolution to a {SIDE}x{SIDE} pyvista mesh",
+        {
+            "diffnurbs": Impl(mesh_points, SIDE * SIDE, reference),
+            "scipy": "no meshes",
+            "splipy": "no meshes",
+            "geomdl": "not asked (pure Python)",
+        },
+        {},
+    )
+
+
+def kinematic_sweep_case(rng: np.random.Generator) -> Case:
+    profile = dn.circle(0.2, center=(0.0, 0.0, 0.0))
+    t = np.linspace(0.0, 1.0, 8)
+    path_points = np.stack([4 * t, np.sin(2 * math.pi * t), 0.3 * t**2], axis=1)
+    path = dn.NURBSCurve(path_points + 0.01 * rng.standard_normal(path_points.shape), 3)
+    sweep = dn.kinematic_sweep(profile, path, frame="rmf")
+    us = jnp.linspace(0.0, 1.0, SWEEP_SIDE)
+    vs = jnp.linspace(0.0, 1.0, SWEEP_SIDE)
+    grid = jax.jit(lambda s: s.grid(us, vs))
+    reference = np.asarray(grid(sweep))
+    return Case(
+        f"9. kinematic sweep (rotation-minimising frame) on a {SWEEP_SIDE}x{SWEEP_SIDE} grid",
+        {
+            "diffnurbs": Impl(lambda: _ready(grid(sweep)), SWEEP_SIDE**2, reference),
+            "scipy": "no sweeps",
+            "splipy": "n/a: its sweep uses the Frenet frame (another surface)",
+            "geomdl": "no sweeps",
+        },
+        {},
+    )
+
+
+def refinement_case(rng: np.random.Generator) -> Case:
+    """Knots inserted per second; every library's refined control points are compared."""
+    profile = _profile(rng, n=50)
+    values = np.sort(rng.uniform(0.0, 1.0, REFINE_KNOTS))
+    refine = jax.jit(lambda c, v: c.refine(v).control_points)
+    values_jax = jnp.asarray(values)
+    reference = np.asarray(refine(profile, values_jax))
+    knots, points = np.asarray(profile.knots), np.asarray(profile.control_points)
+    basis = splipy.BSplineBasis(profile.degree + 1, knots)
+
+    def splipy_refine():
+        curve = splipy.Curve(basis, points)
+        curve.insert_knot(list(values))
+        return curve.controlpoints
+
+    def geomdl_refine():  # A5.1 one knot at a time (its A5.4 inserts knots of its own)
+        points_now, knots_now = [list(p) for p in points], knots.tolist()
+        for u in values[:GEOMDL_KNOTS]:
+            span = helpers.find_span_linear(profile.degree, knots_now, len(points_now), u)
+            points_now = helpers.knot_insertion(profile.degree, knots_now, points_now, u, span=span)
+            knots_now = helpers.knot_insertion_kv(knots_now, u, span, 1)
+        return points_now
+
+    geomdl_reference = np.asarray(refine(profile, values_jax[:GEOMDL_KNOTS]))
+    return Case(
+        f"10. knot refinement: {REFINE_KNOTS:,} knots into a cubic with 50 control points",
+        {
+            "diffnurbs": Impl(lambda: _ready(refine(profile, values_jax)), REFINE_KNOTS, reference),
+            "scipy": "refines one knot per call (FITPACK insert)",
+            "splipy": Impl(splipy_refine, REFINE_KNOTS, reference),
+            "geomdl": Impl(geomdl_refine, GEOMDL_KNOTS, geomdl_reference),
+        },
+        {"splipy": 1, "geomdl": 10},
+    )
+
+
+def cases(rng: np.random.Generator) -> list[Case]:
+    return [
+        revolve_case(rng),
+        tessellate_case(rng),
+        kinematic_sweep_case(rng),
+        refinement_case(rng),
+    ]

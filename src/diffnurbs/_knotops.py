@@ -7,6 +7,9 @@ with `find_span` and every new control point is a `where` over the old ones, so 
 shapes depend only on how many knots are inserted.
 """
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -48,6 +51,13 @@ def insert(points, knots, degree, values):
     values = jnp.ravel(jnp.asarray(values, dtype=knots.dtype))
     if values.size == 0:
         return points, knots
+    return _refined(points, knots, degree, values)
+
+
+# One compiled program per shape: run op by op, the triangle's few dozen small operations
+# were each compiled anew for every control-point count (about 1 s per refinement level).
+@functools.partial(jax.jit, static_argnums=2)
+def _refined(points, knots, degree, values):
     new_knots = jnp.sort(jnp.concatenate([knots, values]))
     new_index = jnp.arange(points.shape[0] + values.size)
     span = find_span(knots, degree, new_knots[new_index])

@@ -99,7 +99,7 @@ def kinematic_sweep_case(rng: np.random.Generator) -> Case:
         {
             "diffnurbs": Impl(lambda: _ready(grid(sweep)), SWEEP_SIDE**2, reference),
             "scipy": "no sweeps",
-            "splipy": "n/a: its sweep uses the Frenet frame (another surface)",
+            "splipy": "its sweep uses the Frenet frame (another surface)",
             "geomdl": "no sweeps",
         },
         {},

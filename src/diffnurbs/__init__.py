@@ -29,6 +29,7 @@ from ._cubic import (
 )
 from ._curve import NURBSCurve as NURBSCurve
 from ._ffd import deform_image as deform_image, ffd as ffd, ffd_lattice as ffd_lattice
+from ._fit_curve import CurveFitReport as CurveFitReport, fit_curve as fit_curve
 from ._fit_function import FunctionFitReport as FunctionFitReport, fit_function as fit_function
 from ._frames import (
     KinematicSweep as KinematicSweep,

@@ -29,6 +29,9 @@ from ._curve import NURBSCurve, clamp_to_domain, safe_norm
 from ._interpolate import _data_points, _parameters, approximate
 from ._validate import check_control_count, check_degree, check_knots, concrete
 
+_POLISH_STEPS = 4  # Gauss-Newton steps after Levenberg-Marquardt (see `_solve`)
+_ROUNDING_SLACK = 64  # ulps of the sum of squares the polish may add (see `_solve`)
+
 
 class CurveFitReport(eqx.Module):
     """What `fit_curve` did.
@@ -195,39 +198,69 @@ def _solve(
     centre = jnp.mean(points, axis=0)
     size = jnp.max(jnp.abs(points - centre))
     scale = jnp.where(size > 0, size, 1.0)
-    lower, upper = knots[degree], knots[-degree - 1]
     n_weights = control.shape[0] - 1 - hold_last
 
-    def unpack(unknowns):
+    def unpack(unknowns, u, knots):
         scaled_control, log_weights, interior = unknowns
-        params = u if interior is None else u.at[1:-1].set(clamp_to_domain(interior, lower, upper))
+        if interior is not None:
+            interior = clamp_to_domain(interior, knots[degree], knots[-degree - 1])
+            u = u.at[1:-1].set(interior)
         weights = None
         if log_weights is not None:
             held = jnp.zeros(1 + hold_last, log_weights.dtype)
             weights = jnp.exp(jnp.concatenate([held[:1], log_weights, held[1:]]))
-        return scaled_control, weights, params
+        return scaled_control, weights, u
 
-    def residuals(unknowns, scaled_points):
-        scaled_control, weights, params = unpack(unknowns)
-        curve = NURBSCurve(scaled_control, degree, knots, weights)
-        return curve(params) - scaled_points
+    # Everything the residuals depend on goes in through `args`, so the implicit
+    # derivative of the optimum reaches it (the parameters and knots depend on the points).
+    def residuals(unknowns, args):
+        scaled_points, u, knots = args
+        scaled_control, weights, params = unpack(unknowns, u, knots)
+        return NURBSCurve(scaled_control, degree, knots, weights)(params) - scaled_points
 
     start = (
         (control - centre) / scale,
         jnp.zeros(n_weights, points.dtype) if rational else None,
         u[1:-1] if correct_parameters else None,
     )
-    solution = optx.least_squares(
+    # The implicit derivative solves with the Hessian of the sum of squares, singular where
+    # a parameter sits clamped at an end: least squares (SVD) handles that.
+    adjoint = optx.ImplicitAdjoint(linear_solver=lx.SVD())
+    args = ((points - centre) / scale, u, knots)
+    damped = optx.least_squares(
         residuals,
         optx.LevenbergMarquardt(rtol=tol, atol=tol),
         start,
-        args=(points - centre) / scale,
+        args=args,
         max_steps=max_steps,
         throw=False,
-        # The implicit derivative solves with the Hessian of the sum of squares, singular
-        # where a parameter sits clamped at an end: least squares (SVD) handles that.
-        adjoint=optx.ImplicitAdjoint(linear_solver=lx.SVD()),
+        adjoint=adjoint,
     )
-    scaled_control, weights, params = unpack(solution.value)
-    converged = solution.result == optx.RESULTS.successful
-    return centre + scale * scaled_control, weights, params, solution.stats["num_steps"], converged
+    # Levenberg-Marquardt stops when an accepted step is small, which also happens after
+    # rejected steps have shrunk its trust region short of the optimum (seen at 1e-9 from
+    # it with tol 1e-13): there the sum of squares no longer tells better from worse.
+    # Undamped Gauss-Newton steps from there converge fast; they are kept unless they
+    # raise the residual.
+    polished = optx.least_squares(
+        residuals,
+        optx.GaussNewton(rtol=tol, atol=tol, linear_solver=lx.SVD()),
+        damped.value,
+        args=args,
+        max_steps=_POLISH_STEPS,
+        throw=False,
+        adjoint=adjoint,
+    )
+    # Near the optimum the sum of squares changes below its rounding, so the comparison
+    # allows that much.
+    damped_loss = _sum_squares(residuals(damped.value, args))
+    slack = _ROUNDING_SLACK * jnp.finfo(damped_loss.dtype).eps * damped_loss
+    better = _sum_squares(residuals(polished.value, args)) <= damped_loss + slack
+    value = jax.tree.map(lambda a, b: jnp.where(better, a, b), polished.value, damped.value)
+    scaled_control, weights, params = unpack(value, u, knots)
+    converged = damped.result == optx.RESULTS.successful
+    steps = damped.stats["num_steps"] + polished.stats["num_steps"]
+    return centre + scale * scaled_control, weights, params, steps, converged
+
+
+def _sum_squares(residuals: Array) -> Array:
+    return jnp.sum(residuals**2)

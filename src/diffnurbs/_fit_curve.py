@@ -236,29 +236,36 @@ def _solve(
         throw=False,
         adjoint=adjoint,
     )
+    converged = damped.result == optx.RESULTS.successful
+
     # Levenberg-Marquardt stops when an accepted step is small, which also happens after
     # rejected steps have shrunk its trust region short of the optimum (seen at 1e-9 from
     # it with tol 1e-13): there the sum of squares no longer tells better from worse.
-    # Undamped Gauss-Newton steps from there converge fast; they are kept unless they
-    # raise the residual.
-    polished = optx.least_squares(
-        residuals,
-        optx.GaussNewton(rtol=tol, atol=tol, linear_solver=lx.SVD()),
-        damped.value,
-        args=args,
-        max_steps=_POLISH_STEPS,
-        throw=False,
-        adjoint=adjoint,
-    )
-    # Near the optimum the sum of squares changes below its rounding, so the comparison
-    # allows that much.
-    damped_loss = _sum_squares(residuals(damped.value, args))
-    slack = _ROUNDING_SLACK * jnp.finfo(damped_loss.dtype).eps * damped_loss
-    better = _sum_squares(residuals(polished.value, args)) <= damped_loss + slack
-    value = jax.tree.map(lambda a, b: jnp.where(better, a, b), polished.value, damped.value)
+    # Undamped Gauss-Newton steps (normal equations, pseudo-inverse for the flat
+    # directions) from there converge fast; they are kept unless they raise the residual
+    # beyond its rounding. Only after convergence: far from the optimum they can diverge.
+    def polish(y):
+        polished = optx.least_squares(
+            residuals,
+            optx.GaussNewton(rtol=tol, atol=tol, linear_solver=lx.Normal(lx.SVD())),
+            y,
+            args=args,
+            max_steps=_POLISH_STEPS,
+            throw=False,
+            adjoint=adjoint,
+        )
+        loss = _sum_squares(residuals(y, args))
+        slack = _ROUNDING_SLACK * jnp.finfo(loss.dtype).eps * loss
+        better = _sum_squares(residuals(polished.value, args)) <= loss + slack
+        value = jax.tree.map(lambda a, b: jnp.where(better, a, b), polished.value, y)
+        return value, polished.stats["num_steps"]
+
+    def keep(y):
+        return y, jnp.zeros((), damped.stats["num_steps"].dtype)
+
+    value, polish_steps = jax.lax.cond(converged, polish, keep, damped.value)
     scaled_control, weights, params = unpack(value, u, knots)
-    converged = damped.result == optx.RESULTS.successful
-    steps = damped.stats["num_steps"] + polished.stats["num_steps"]
+    steps = damped.stats["num_steps"] + polish_steps
     return centre + scale * scaled_control, weights, params, steps, converged
 
 

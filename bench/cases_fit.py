@@ -8,7 +8,7 @@ solve the same problem and their curves, evaluated at common parameters, must ag
 import jax
 import jax.numpy as jnp
 import numpy as np
-from cases import Case, Impl
+from cases import Case, Impl, clamped_random_knots, parameters
 from scipy.interpolate import make_interp_spline, make_lsq_spline
 
 import diffnurbs as dn
@@ -17,6 +17,8 @@ POINTS = 10_000
 LSQ_CONTROL = 500
 TOL = 1e-6
 CHECK = np.linspace(0.0, 1.0, 200_001)  # the common grid of the fit_function case
+FIT_POINTS = 1000
+FIT_CONTROL = 12
 
 
 def _ready(x):
@@ -136,5 +138,74 @@ def fit_function_case() -> Case:
     )
 
 
+def _noisy_rational_curve(rng: np.random.Generator) -> np.ndarray:
+    """FIT_POINTS samples of a random rational cubic in 3D, with a little noise."""
+    knots = clamped_random_knots(rng, FIT_CONTROL, 3)
+    control, weights = rng.uniform(-1.0, 1.0, (FIT_CONTROL, 3)), rng.uniform(0.5, 2.0, FIT_CONTROL)
+    truth = dn.NURBSCurve(control, 3, knots, weights)
+    samples = np.asarray(truth(parameters(rng, FIT_POINTS, ordered=True)))
+    return samples + 1e-3 * rng.standard_normal(samples.shape)
+
+
+def _rms(curve, u, points) -> float:
+    return float(np.sqrt(np.mean(np.sum((np.asarray(curve(u)) - points) ** 2, axis=-1))))
+
+
+def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
+    """fit_curve of a noisy rational curve, with fixed centripetal parameters (parameter
+    correction makes the Jacobian dense in the m parameters: O(m^3) per step, too slow for
+    10^3 points). Non-rational, it is plain least squares: scipy's make_lsq_spline with the
+    same parameters and knots solves the same problem. Nothing else fits weights."""
+    points = jnp.asarray(_noisy_rational_curve(rng))
+    host = np.asarray(points)
+    u = np.asarray(dn.parametrize(points))
+    at = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, 2000)))
+    result = []
+    for rational in (False, True):
+        curve, report = dn.fit_curve(points, 3, FIT_CONTROL, rational, full_output=True)
+        name = (
+            f"{15 + rational}. fit_curve, {FIT_POINTS} noisy points of a rational cubic, "
+            f"{FIT_CONTROL} control points, {'rational' if rational else 'non-rational'}: "
+            f"rms residual {float(report.rms_residual):.2e} in {int(report.steps)} steps"
+        )
+        if rational:
+            scipy_impl = "no rational fitting"
+        else:
+            knots = np.asarray(curve.knots)
+            scipy_rms = _rms(make_lsq_spline(u, host, knots, 3), u, host)
+            name += f" (scipy make_lsq_spline {scipy_rms:.2e})"
+            scipy_impl = Impl(
+                lambda knots=knots: make_lsq_spline(u, host, knots, 3),
+                FIT_POINTS,
+                np.asarray(curve(at)),
+                lambda s: s(np.asarray(at)),
+            )
+        result.append(
+            Case(
+                name,
+                {
+                    "diffnurbs": Impl(
+                        lambda rational=rational: _ready(
+                            dn.fit_curve(points, 3, FIT_CONTROL, rational)
+                        ),
+                        FIT_POINTS,
+                        np.asarray(curve(at)),
+                        lambda c: c(at),
+                    ),
+                    "scipy": scipy_impl,
+                    "splipy": "not asked",
+                    "geomdl": "approximate_curve interpolates the ends (A9.7): another problem",
+                },
+                {},
+            )
+        )
+    return result
+
+
 def cases(rng: np.random.Generator) -> list[Case]:
-    return [interpolation_case(rng), least_squares_case(rng), fit_function_case()]
+    return [
+        interpolation_case(rng),
+        least_squares_case(rng),
+        fit_function_case(),
+        *fit_curve_cases(rng),
+    ]

@@ -2,9 +2,9 @@
 degree elevation and knot merging.
 
 The functions work on homogeneous control points along axis 0, so the same code serves
-curves and either direction of a surface. A knot value may be traced: the span is found
-with `find_span` and every new control point is a `where` over the old ones, so the array
-shapes depend only on how many knots are inserted.
+curves and either direction of a surface. Insertion and refinement compute every new
+control point at once as a blossom of the old curve (the Oslo algorithm): the knot values
+may be traced, and the array shapes depend only on how many knots are inserted.
 """
 
 import functools

@@ -173,7 +173,7 @@ def test_gradient_with_respect_to_the_points_matches_finite_differences(rng, opt
 
     grad = np.asarray(jax.grad(loss)(points))
     assert np.all(np.isfinite(grad))
-    for k, d in [(0, 0), (3, 1), (9, 0), (14, 1), (SAMPLES - 1, 1)]:
+    for k, d in [(0, 0), (9, 1), (SAMPLES - 1, 1)]:
 
         def shifted(s, k=k, d=d):
             return float(loss(points.at[k, d].add(s)))

@@ -36,12 +36,12 @@ _ROUNDING_SLACK = 64  # ulps of the sum of squares the polish may add (see `_sol
 class CurveFitReport(eqx.Module):
     """What `fit_curve` did.
 
-    - `steps`: Levenberg-Marquardt steps taken.
+    - `steps`: solver steps taken: Levenberg-Marquardt, then the Gauss-Newton polish.
     - `rms_residual`, `max_residual`: root mean square and largest distance
       `|C(u_k) - Q_k|` from the data points to the curve at their parameters.
     - `parameters`: the parameters `u_k` of the data points on the fitted curve (the
       corrected ones with `correct_parameters`).
-    - `converged`: whether the solver met its tolerance within `max_steps`.
+    - `converged`: whether Levenberg-Marquardt met its tolerance within `max_steps`.
     """
 
     steps: Array
@@ -83,7 +83,8 @@ def fit_curve(
     scaling all weights changes nothing) and with `correct_parameters` also over the
     interior parameters `u_1 .. u_{m-2}` (clamped to the domain; the end points keep the
     ends of the domain). The knots are fixed; the start is `approximate(points, n_control,
-    degree, parametrization)` with all weights 1. With `correct_parameters` and a single
+    degree, parametrization)` with all weights 1 (whose ends interpolate the end points;
+    the fit's need not). With `correct_parameters` and a single
     rational segment (`n_control == degree + 1`) the last weight is held at 1 as well: a
     rational reparametrisation moves any positive end weights to 1 without changing the
     curve (NURBS Book §6.4), and holding it keeps the problem free of that flat direction.
@@ -91,8 +92,9 @@ def fit_curve(
     Data sampled from a curve of the family are recovered to rounding: a conic arc by a
     rational quadratic with `correct_parameters=True`.
 
-    The cost of a step is that of a dense QR of the Jacobian: `(m dim) x` the number of
-    unknowns, which with `correct_parameters` grows with the number of points `m`.
+    A step costs a dense QR of the Jacobian, `(m dim) x` the number of unknowns, which
+    with `correct_parameters` grows with the number of points `m`: O(m^3) per step, so
+    parameter correction suits up to a few hundred points (10^3 points take minutes).
 
     **Arguments:**
 

@@ -2,8 +2,8 @@
 
 The unknowns are the control points, the weights and, optionally, the parameters of the
 data; Levenberg-Marquardt minimises `sum_k |C(u_k) - Q_k|^2` over them, with Jacobians by
-forward-mode autodiff. The start is the linear least-squares fit of `approximate`, whose
-knots stay fixed.
+forward-mode autodiff. The start is the linear least-squares fit of `approximate` (ends
+free), whose knots stay fixed.
 
 Parameter correction runs jointly: the interior parameters are unknowns of the same
 solve, clamped to the domain. The alternative, solving for the curve, re-projecting the
@@ -82,9 +82,9 @@ def fit_curve(
     the weights (as logarithms, so they stay positive; the first is held at 1, since
     scaling all weights changes nothing) and with `correct_parameters` also over the
     interior parameters `u_1 .. u_{m-2}` (clamped to the domain; the end points keep the
-    ends of the domain). The knots are fixed; the start is `approximate(points, n_control,
-    degree, parametrization)` with all weights 1 (whose ends interpolate the end points;
-    the fit's need not). With `correct_parameters` and a single
+    ends of the domain). The knots are fixed; the start is the linear least-squares fit
+    `approximate(points, n_control, degree, parametrization, interpolate_ends=False)` with
+    all weights 1. With `correct_parameters` and a single
     rational segment (`n_control == degree + 1`) the last weight is held at 1 as well: a
     rational reparametrisation moves any positive end weights to 1 without changing the
     curve (NURBS Book §6.4), and holding it keeps the problem free of that flat direction.
@@ -140,7 +140,9 @@ def fit_curve(
     if knots is not None and isinstance(parametrization, str):
         lower, upper = knots[degree], knots[-degree - 1]
         u = lower + (upper - lower) * u
-    start = approximate(points, n_control, degree, u, knots=knots)
+    # The linear least-squares curve: for a polynomial fit on fixed parameters it is
+    # already the optimum, and Levenberg-Marquardt only confirms it.
+    start = approximate(points, n_control, degree, u, knots=knots, interpolate_ends=False)
     tol = float(np.sqrt(np.finfo(points.dtype).eps)) if tol is None else float(tol)
     hold_last = rational and correct_parameters and n_control == degree + 1
     control, weights, u, steps, converged = _solve(

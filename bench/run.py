@@ -19,6 +19,7 @@ from pathlib import Path  # noqa: E402
 
 import cases_fit  # noqa: E402
 import cases_geometry  # noqa: E402
+import cases_inversion  # noqa: E402
 import cases_ph  # noqa: E402
 import numpy as np  # noqa: E402
 from cases import LIBRARIES, Case, Impl, all_cases, discrepancy  # noqa: E402
@@ -41,8 +42,8 @@ SIZES = {
     "geomdl_derivatives": 1000,
     "geomdl_surface": 1000,
 }
-# Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-).
-TOPIC_CASES = (cases_geometry, cases_ph, cases_fit)
+# Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-18).
+TOPIC_CASES = (cases_geometry, cases_ph, cases_fit, cases_inversion)
 RESULTS = Path(__file__).parent / "results" / "latest.md"
 
 

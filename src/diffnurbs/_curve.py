@@ -306,8 +306,9 @@ class NURBSCurve(AbstractRationalSpline):
         """Point inversion: the parameter `u` of the point `C(u)` nearest to `point`.
 
         Every query starts from the nearest of a polyline through `samples_per_span`
-        points per knot span (default `2 (p + 1)`; near-ties, as across the seam of a
-        closed curve, start from both candidates), then a projected Newton method on
+        times as many points as there are knot spans, spread evenly over the domain, and
+        the knots (default `3 (p + 1)`; near-ties, as across the seam of a closed curve,
+        start from both candidates), then a projected Newton method on
         `|C(u) - P|^2` converges inside the domain; an end is the answer where the
         distance still falls beyond it. `jax.grad` of the result reaches the points and
         the curve (implicit function theorem). See `_inversion`.
@@ -315,8 +316,8 @@ class NURBSCurve(AbstractRationalSpline):
         **Arguments:**
 
         - `point`: array of shape `(..., dim)`: one point or many.
-        - `samples_per_span`: samples per knot span for the start; raise it for curves
-          whose spans wind back and forth.
+        - `samples_per_span`: samples per knot span (on average) for the start; raise it
+          for curves that wind back and forth within a span.
 
         **Returns:**
 

@@ -2,23 +2,25 @@
 
 Two stages, both vectorised over many query points (NURBS Book §6.1):
 
-1. a start: the curve (surface) is sampled at a few parameters per knot span (per pair of
-   spans), and every query starts from its nearest sample, which is close to the global
-   minimum of the distance;
+1. starts: a polyline through samples in every knot span and spread evenly over the
+   domain (the grid lines through such samples, for a surface); each query starts from
+   its foot on the nearest segment, and also from three others where they could hold
+   a nearer point (a second minimum close by, the twin across the seam of a closed
+   curve, a second branch) — see `_starts`;
 2. a projected Newton method on `f(x) = |S(x) - P|^2 / 2` with Levenberg damping: the exact
-   Hessian `J^T J + sum_k r_k S_xx,k` from the analytic second derivatives, a coordinate at
-   a bound of the domain held there while the gradient pushes it outwards (ends of a curve,
-   edges and corners of a surface), a step accepted only if `f` does not grow.
+   Hessian `J^T J + sum_k r_k S_xx,k` from the analytic second derivatives (Gauss-Newton
+   where it is indefinite), a coordinate at a bound of the domain held there while the
+   gradient pushes it outwards (ends of a curve, edges and corners of a surface), a step
+   accepted only if `f` does not grow.
 
-A general solver (`optimistix.minimise`) would know neither the box of the domain nor the
-analytic Hessian, and would stop each point only when all of them stop; this loop uses
-both and freezes every query as soon as its own step is small.
+A general solver (`optimistix.minimise`) knows neither the box of the domain nor the
+analytic Hessian, and a batch of solves runs until its slowest member stops; this loop
+uses both, and finishes the few slow queries in compact groups (`_minimise`).
 
-The loop runs on values without gradients. One more Newton step from the converged
-parameters, taken on the live curve, gives the derivatives of the optimum by the implicit
-function theorem (`dx/dθ = -H^{-1} dg/dθ`, since `g = 0` there) and zero along a
-coordinate held at a bound: `jax.grad` reaches the query points, control points, weights
-and knots.
+The loop runs on values without gradients. A last Newton step on the live values then
+gives the derivatives of the optimum by the implicit function theorem
+(`dx/dθ = -H^{-1} dg/dθ`, since `g = 0` there); a coordinate held at a bound follows the
+bound. `jax.grad` reaches the query points, control points, weights and knots.
 """
 
 import math
@@ -54,47 +56,64 @@ def _query_points(point, dim, dtype):
     return point.reshape(-1, dim), point.shape[:-1]
 
 
-def _span_samples(knots, degree, count):
-    """`count` evenly spaced parameters in every knot span of the domain, and its end."""
+def _domain_samples(knots, degree, count):
+    """`count` parameters in every knot span and as many again spread evenly over the
+    domain (sorted, ends included); the steps between them and each sample's gap (the
+    larger of its two steps), neither less than the even spacing.
+
+    Both sets: a short span may hold much of the curve (dense control points there), a
+    long one may wind around more than once; the nearest sample must lie in the right
+    basin in either case. The floor on steps and gaps keeps a cluster of short spans
+    from passing for separate basins in `_starts`."""
     starts, ends = knots[degree : -degree - 1], knots[degree + 1 : -degree]
     fractions = jnp.arange(count, dtype=knots.dtype) / count
-    inner = starts[:, None] + (ends - starts)[:, None] * fractions
-    return jnp.concatenate([inner.ravel(), ends[-1:]])
+    per_span = starts[:, None] + (ends - starts)[:, None] * fractions
+    even = jnp.linspace(0.0, 1.0, per_span.size + 1, dtype=knots.dtype)
+    even = starts[0] + (ends[-1] - starts[0]) * even
+    samples = jnp.sort(jnp.concatenate([per_span.ravel(), even]))
+    steps = jnp.maximum(jnp.diff(samples), even[1] - even[0])
+    gaps = jnp.maximum(jnp.pad(steps, (1, 0)), jnp.pad(steps, (0, 1)))
+    return samples, steps, gaps
 
 
 class _Segments(NamedTuple):
     """A polyline through samples of a curve or surface: segment ends `a`, `b` (shape
-    `(S, dim)`), their parameters (`(S, d)`), and how far the geometry bulges from each
-    segment (twice the distance at the middle parameter, shape `(S,)`)."""
+    `(S, dim)`), their parameters (`(S, d)`), the size of the parameter cell around each
+    segment (`(S, d)`), and how far the geometry bulges from each segment (twice the
+    distance at the middle parameter, shape `(S,)`)."""
 
     a: Array
     b: Array
     a_params: Array
     b_params: Array
+    extent: Array
     bulge: Array
 
 
-def _segments(evaluate, a_params, b_params):
+def _segments(evaluate, a_params, b_params, extent):
     """`_Segments` between the parameters `a_params` and `b_params`, `evaluate(params)`
     giving the points of the geometry."""
     a, b = evaluate(a_params), evaluate(b_params)
     middle = evaluate((a_params + b_params) / 2)
     bulge = 2 * jnp.sqrt(jnp.sum((middle - (a + b) / 2) ** 2, axis=-1))
-    return _Segments(a, b, a_params, b_params, bulge)
+    return _Segments(a, b, a_params, b_params, extent, bulge)
 
 
 def _starts(segments, points):
-    """Two start parameters per query point, from the polyline segments nearest to it,
-    and whether the second one is needed.
+    """Four start parameters per query point, from the polyline segments nearest to it,
+    and whether the last three are needed.
 
     The foot of a query on its nearest segment, with linearly interpolated parameters,
     is the first start: within `O(h^2)` of the geometry's own foot when the query is
-    near it. The second is the nearest segment more than two sample spacings away in
-    parameter space: across the seam of a closed curve or surface it is the twin of the
-    first (equally near, on the other side of the domain); where two branches are almost
-    equally near it is the other branch. It is needed only if, bulges included, the
-    geometry could come nearer there than at the first start; Newton then runs from both
-    and the nearer result wins.
+    near it. The others: the nearest segment whose foot differs from the first (where
+    the geometry turns sharply within a sample spacing, two minima can share one stretch
+    of the polyline); the nearest whose foot lies farther from the first foot, in some
+    parameter, than the cells of the two segments reach (across the seam of a closed
+    curve or surface, the twin of the first; where two branches are almost equally near,
+    the other branch); and the segment along which the geometry could come nearest, its
+    distance less its bulge (a short segment that cuts a corner of a curved piece). A
+    start is needed only if the geometry could come nearer there than at the first;
+    Newton runs from each needed start and the nearest result wins.
 
     Distances are compared as `|A + tD - P|^2 - |P|^2` (matrix products, in blocks so
     that `N x S` never sits in memory whole), after moving the origin to the middle of
@@ -102,13 +121,13 @@ def _starts(segments, points):
 
     **Returns:**
 
-    `(starts, needed)` of shapes `(N, 2, d)` and `(N,)`.
+    `(starts, needed)` of shapes `(N, 4, d)` and `(N, 3)`.
     """
     origin = jnp.mean(segments.a, axis=0)
     a, points = segments.a - origin, points - origin
     d, d_params = segments.b - segments.a, segments.b_params - segments.a_params
     aa, ad, dd = jnp.sum(a * a, -1), jnp.sum(a * d, -1), jnp.sum(d * d, -1)
-    reach = 2 * jnp.max(jnp.abs(d_params), axis=0)
+    max_aa = jnp.max(aa)
 
     def foot(along, length2):
         degenerate = length2 == 0
@@ -124,13 +143,34 @@ def _starts(segments, points):
         along = d @ point - ad
         t = foot(along, dd)
         score = aa - 2 * (a @ point) - 2 * t * along + t * t * dd
-        first = jnp.argmin(score)
+        # Ties (segments sharing the nearest vertex, all meridians at a pole) go to the
+        # segment most nearly perpendicular to the way to the query: the one along which
+        # the distance grows slowest, e.g. the meridian towards the query.
+        slack = 64 * jnp.finfo(score.dtype).eps * (max_aa + jnp.dot(point, point))
+        slope = (t * dd - along) ** 2  # (D . (foot - P))^2, zero for a foot inside
+        slope = slope / jnp.maximum(dd * (score + jnp.dot(point, point)), jnp.finfo(dd.dtype).tiny)
+        # A segment of zero length (a repeated sample, a grid line squeezed into a pole)
+        # has no direction to offer.
+        slope = jnp.where(dd == 0, jnp.finfo(dd.dtype).max, slope)
+
+        def best(allowed):
+            masked = jnp.where(allowed, score, jnp.inf)
+            tied = masked <= jnp.min(masked) + slack
+            return jnp.argmin(jnp.where(tied, slope, jnp.inf))
+
+        first = best(True)
         feet = segments.a_params + t[:, None] * d_params
-        away = jnp.any(jnp.abs(feet - feet[first]) > reach, axis=-1)
-        second = jnp.argmin(jnp.where(away, score, jnp.inf))
-        (x1, d1), (x2, d2) = start(point, first), start(point, second)
-        needed = d2 - segments.bulge[second] <= d1 + segments.bulge[first]
-        return jnp.stack([x1, x2]), needed
+        apart = jnp.abs(feet - feet[first])
+        elsewhere = jnp.any(apart > 0, axis=-1)
+        far = jnp.any(apart > segments.extent[first] + segments.extent, axis=-1)
+        lower = jnp.sqrt(jnp.maximum(score + jnp.dot(point, point), 0.0)) - segments.bulge
+        others = jnp.stack(
+            [best(elsewhere), best(far), jnp.argmin(jnp.where(elsewhere, lower, jnp.inf))]
+        )
+        x1, d1 = start(point, first)
+        x, distance = jax.vmap(lambda k: start(point, k))(others)
+        needed = distance - segments.bulge[others] <= d1 + segments.bulge[first]
+        return jnp.concatenate([x1[None], x]), needed
 
     block = max(1, _SEARCH_BLOCK // a.shape[0])
     return jax.lax.map(nearest, points, batch_size=block)
@@ -147,11 +187,16 @@ def _objective(model, x, points):
     return f, gradient, hessian, gauss_newton
 
 
+def _held(gradient, x, lower, upper):
+    """`(at lower, at upper)`: coordinates at a bound whose gradient pushes them outwards."""
+    return (x <= lower) & (gradient > 0), (x >= upper) & (gradient < 0)
+
+
 def _reduce(gradient, hessian, x, lower, upper):
-    """The Newton system on the free coordinates: a coordinate at a bound whose gradient
-    pushes it outwards is held (identity row, zero right-hand side)."""
-    held = ((x <= lower) & (gradient > 0)) | ((x >= upper) & (gradient < 0))
-    free = ~held
+    """The Newton system on the free coordinates: held ones (see `_held`) get an identity
+    row and a zero right-hand side."""
+    at_lower, at_upper = _held(gradient, x, lower, upper)
+    free = ~(at_lower | at_upper)
     eye = jnp.eye(x.shape[-1], dtype=x.dtype)
     hessian = jnp.where(free[:, :, None] & free[:, None, :], hessian, eye)
     return jnp.where(free, gradient, 0.0), hessian
@@ -172,11 +217,6 @@ def _newton_step(gradient, hessian):
     safe = jnp.where(definite, det, 1.0)
     step = jnp.stack([(b * g1 - c * g0) / safe, (b * g0 - a * g1) / safe], axis=-1)
     return jnp.where(definite[:, None], step, 0.0), definite
-
-
-def _clamp(x, lower, upper):
-    # `where`, not `clip`: a coordinate at a bound must keep no gradient, a free one all of it.
-    return jnp.where(x < lower, lower, jnp.where(x > upper, upper, x))
 
 
 def _newton(model, x, points, lower, upper, done, max_steps):
@@ -208,7 +248,10 @@ def _newton(model, x, points, lower, upper, done, max_steps):
         damping = jnp.where(accept, damping / 10, jnp.where(done, damping, raised))
         derivatives = (gradient, hessian, gauss_newton)
         kept = [pick(new, old) for new, old in zip(derivatives_t, derivatives, strict=True)]
-        return (i + 1, pick(trial, x), pick(f_t, f), *kept, damping, done | (accept & small))
+        # A step too small to matter ends the search even when rejected: the damping
+        # has grown until the step vanished, at a kink (a knot of a C0 curve) or at
+        # rounding level.
+        return (i + 1, pick(trial, x), pick(f_t, f), *kept, damping, done | small)
 
     def running(state):
         return (state[0] < max_steps) & ~jnp.all(state[-1])
@@ -248,8 +291,8 @@ def _minimise(model, x, points, lower, upper, done):
 
 
 def _invert(spline, model, starts, points):
-    """Minimise from both starts on frozen values, keep the nearer result, then take one
-    Newton step on the live values (see above).
+    """Minimise from both starts on frozen values, keep the nearer result, then attach
+    the derivatives of the optimum (see above).
 
     `model(spline, x)` gives the points, first and second derivatives at `x` of shape
     `(N, d)`; `starts` is `_starts`'s answer; `spline.domain` gives the bounds.
@@ -257,16 +300,31 @@ def _invert(spline, model, starts, points):
     (starts, needed), (n, k, d) = starts, starts[0].shape
     frozen, frozen_points = jax.lax.stop_gradient((spline, jnp.repeat(points, k, axis=0)))
     lower, upper = _bounds(frozen)
-    skip = jnp.stack([jnp.zeros_like(needed), ~needed], axis=1).reshape(n * k)
+    skip = jnp.concatenate([jnp.zeros_like(needed[:, :1]), ~needed], axis=1).reshape(n * k)
     x, f = _minimise(
         lambda x: model(frozen, x), starts.reshape(n * k, d), frozen_points, lower, upper, skip
     )
     best = jnp.argmin(f.reshape(n, k), axis=1)
     x = jax.lax.stop_gradient(x.reshape(n, k, d)[jnp.arange(n), best])
-    lower, upper = _bounds(spline)
+    return _attach_derivatives(spline, model, x, points, lower, upper)
+
+
+def _attach_derivatives(spline, model, x, points, lower, upper):
+    """A last Newton step `-H^{-1} g` on the live values: it polishes the converged `x`
+    to rounding level, and its derivative is that of the optimum, `-H^{-1} dg/dθ`, by the
+    implicit function theorem. A coordinate held at a bound follows the bound (a knot).
+    Where the step is not small the optimum sits on a kink (a knot of a C0 curve): no
+    step there, and no derivative."""
+    tolerance = math.sqrt(jnp.finfo(x.dtype).eps) * (upper - lower)
+    live_lower, live_upper = _bounds(spline)
     _, gradient, hessian, _ = _objective(lambda x: model(spline, x), x, points)
     move, _ = _newton_step(*_reduce(gradient, hessian, x, lower, upper))
-    return _clamp(x + move, lower, upper)
+    smooth = jnp.all(jnp.abs(jax.lax.stop_gradient(move)) <= tolerance, axis=-1, keepdims=True)
+    at_lower, at_upper = _held(jax.lax.stop_gradient(gradient), x, lower, upper)
+    x = x + jnp.where(smooth, move, 0.0)
+    # `where`, not `clip`: the gradient must pass whole to a free coordinate or a bound.
+    at_lower, at_upper = at_lower | (x < live_lower), at_upper | (x > live_upper)
+    return jnp.where(at_lower, live_lower, jnp.where(at_upper, live_upper, x))
 
 
 def _bounds(spline):
@@ -304,14 +362,15 @@ def curve_closest_point(
 ) -> Float[Array, "..."]:
     """Parameters of the points of `curve` nearest to `point` (see `NURBSCurve.closest_point`)."""
     points, batch = _query_points(point, curve.dim, curve.knots.dtype)
-    samples = _sample_count(samples_per_span, 2 * (curve.degree + 1))
+    samples = _sample_count(samples_per_span, 3 * (curve.degree + 1))
     return _curve_parameters(curve, points, samples).reshape(batch)
 
 
 @eqx.filter_jit
 def _curve_parameters(curve, points, samples):
-    u = _span_samples(curve.knots, curve.degree, samples)[:, None]
-    segments = _segments(lambda x: curve._points(x[:, 0]), u[:-1], u[1:])
+    u, steps, _ = _domain_samples(curve.knots, curve.degree, samples)
+    u, steps = u[:, None], steps[:, None]
+    segments = _segments(lambda x: curve._points(x[:, 0]), u[:-1], u[1:], steps)
     return _invert(curve, _curve_model, _starts(segments, points), points)[:, 0]
 
 
@@ -329,12 +388,20 @@ def surface_closest_point(
 @eqx.filter_jit
 def _surface_parameters(surface, points, samples):
     p, q = surface.degree
-    us = _span_samples(surface.knots_u, p, samples[0])
-    vs = _span_samples(surface.knots_v, q, samples[1])
-    grid = jnp.stack(jnp.broadcast_arrays(us[:, None], vs[None, :]), axis=-1)
-    # The grid lines along u and along v, one segment between neighbouring samples each.
+    us, u_steps, u_gaps = _domain_samples(surface.knots_u, p, samples[0])
+    vs, v_steps, v_gaps = _domain_samples(surface.knots_v, q, samples[1])
+
+    def pairs(x, y):
+        return jnp.stack(jnp.broadcast_arrays(x[:, None], y[None, :]), axis=-1)
+
+    grid = pairs(us, vs)
+    # The grid lines along u and along v, one segment between neighbouring samples each;
+    # a segment's cell spans its own step and the gap to the neighbouring lines.
     a_params = jnp.concatenate([grid[:-1].reshape(-1, 2), grid[:, :-1].reshape(-1, 2)])
     b_params = jnp.concatenate([grid[1:].reshape(-1, 2), grid[:, 1:].reshape(-1, 2)])
-    segments = _segments(lambda x: surface._points(x[:, 0], x[:, 1]), a_params, b_params)
+    extent = jnp.concatenate(
+        [pairs(u_steps, v_gaps).reshape(-1, 2), pairs(u_gaps, v_steps).reshape(-1, 2)]
+    )
+    segments = _segments(lambda x: surface._points(x[:, 0], x[:, 1]), a_params, b_params, extent)
     x = _invert(surface, _surface_model, _starts(segments, points), points)
     return x[:, 0], x[:, 1]

@@ -295,16 +295,19 @@ class NURBSSurface(AbstractRationalSpline):
         """Point inversion: the parameters `(u, v)` of the point `S(u, v)` nearest to `point`.
 
         Every query starts from the nearest segment of the grid lines through
-        `samples_per_span` samples per knot span in each direction (default `p + 2` and
-        `q + 2`; near-ties, as across a seam, start from both candidates), then a
-        projected Newton method on `|S(u, v) - P|^2` converges inside the domain: on an
-        edge or at a corner where the distance still falls beyond it. `jax.grad` of the
-        result reaches the points and the surface. See `_inversion`.
+        `samples_per_span` times as many samples as there are knot spans in each
+        direction, spread evenly, and the knots (default `p + 2` and `q + 2`; near-ties,
+        as across a seam, start from both candidates), then a projected Newton method on
+        `|S(u, v) - P|^2` converges inside the domain: on an edge or at a corner where
+        the distance still falls beyond it. `jax.grad` of the result reaches the points
+        and the surface. See `_inversion`.
 
         **Arguments:**
 
         - `point`: array of shape `(..., dim)`: one point or many.
-        - `samples_per_span`: samples per knot span in each direction for the start.
+        - `samples_per_span`: samples per knot span (on average) in each direction for
+          the start; raise it for nets that fold within a span (the start grid must
+          resolve every fold for the nearest of several minima to be found).
 
         **Returns:**
 

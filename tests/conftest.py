@@ -1,5 +1,14 @@
 import gc
 import os
+from pathlib import Path
+
+# Compiled programs go to a disk cache shared by the test workers and the notebook kernels
+# they start (set before jax is imported, and inherited by the kernels): the course
+# notebook, the master and the exercise of a chapter compile many of the same programs.
+os.environ.setdefault(
+    "JAX_COMPILATION_CACHE_DIR", str(Path(__file__).resolve().parents[1] / "build" / "jax-cache")
+)
+os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 
 import jax
 import pytest

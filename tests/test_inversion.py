@@ -56,8 +56,7 @@ def test_straight_cubic_is_orthogonal_projection_clamped_to_its_ends():
 # ------------------------------------------------- curves: brute force and optimality
 
 
-@pytest.mark.parametrize("degree", [1, 2, 3, 5])
-@pytest.mark.parametrize("rational", [False, True])
+@pytest.mark.parametrize("degree, rational", [(1, False), (2, True), (3, False), (5, True)])
 def test_curve_matches_brute_force_and_is_optimal(degree, rational):
     rng = np.random.default_rng(10 * degree + rational)
     curve = random_curve(rng, degree, n_control=degree + 6, dim=3, rational=rational)

@@ -33,54 +33,45 @@ def _data(rng: np.random.Generator, count: int) -> np.ndarray:
     return smooth + 1e-3 * rng.standard_normal((count, 3))
 
 
-def interpolation_case(rng: np.random.Generator) -> Case:
+def _same_problem_case(rng, name, build, scipy_fit, targets) -> Case:
+    """A fit of 10^4 noisy points by `build` (jitted, points -> curve) against
+    `scipy_fit(u, points, knots)` on the chord parameters and the knots diffnurbs chose."""
     points = jnp.asarray(_data(rng, POINTS))
-    build = jax.jit(lambda q: dn.interpolate(q, 3, "chord"))
+    build = jax.jit(build)
     curve = build(points)
     u, knots = np.asarray(dn.parametrize(points, "chord")), np.asarray(curve.knots)
     at = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, 2000)))
-    host = np.asarray(points)
+    host, reference = np.asarray(points), np.asarray(curve(at))
     return Case(
-        f"12. cubic interpolation of {POINTS:.0e} points in 3D (chord, averaged knots)",
+        name,
         {
-            "diffnurbs": Impl(
-                lambda: _ready(build(points)), POINTS, np.asarray(curve(at)), lambda c: c(at)
-            ),
+            "diffnurbs": Impl(lambda: _ready(build(points)), POINTS, reference, lambda c: c(at)),
             "scipy": Impl(
-                lambda: make_interp_spline(u, host, k=3, t=knots),
-                POINTS,
-                np.asarray(curve(at)),
-                lambda s: s(np.asarray(at)),
+                lambda: scipy_fit(u, host, knots), POINTS, reference, lambda s: s(np.asarray(at))
             ),
             "splipy": "not asked",
             "geomdl": "not asked",
         },
+        targets,
+    )
+
+
+def interpolation_case(rng: np.random.Generator) -> Case:
+    return _same_problem_case(
+        rng,
+        f"12. cubic interpolation of {POINTS:.0e} points in 3D (chord, averaged knots)",
+        lambda q: dn.interpolate(q, 3, "chord"),
+        lambda u, points, knots: make_interp_spline(u, points, k=3, t=knots),
         {},
     )
 
 
 def least_squares_case(rng: np.random.Generator) -> Case:
-    points = jnp.asarray(_data(rng, POINTS))
-    build = jax.jit(lambda q: dn.approximate(q, LSQ_CONTROL, 3, "chord", interpolate_ends=False))
-    curve = build(points)
-    u, knots = np.asarray(dn.parametrize(points, "chord")), np.asarray(curve.knots)
-    at = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, 2000)))
-    host = np.asarray(points)
-    return Case(
+    return _same_problem_case(
+        rng,
         f"13. least squares, {POINTS:.0e} points in 3D, {LSQ_CONTROL} control points",
-        {
-            "diffnurbs": Impl(
-                lambda: _ready(build(points)), POINTS, np.asarray(curve(at)), lambda c: c(at)
-            ),
-            "scipy": Impl(
-                lambda: make_lsq_spline(u, host, knots, 3),
-                POINTS,
-                np.asarray(curve(at)),
-                lambda s: s(np.asarray(at)),
-            ),
-            "splipy": "not asked",
-            "geomdl": "not asked",
-        },
+        lambda q: dn.approximate(q, LSQ_CONTROL, 3, "chord", interpolate_ends=False),
+        lambda u, points, knots: make_lsq_spline(u, points, knots, 3),
         # measured 28x (11x per core): scipy 1.17 factors the dense 10^4 x 500 matrix by QR
         {"scipy": 5},
     )

@@ -153,7 +153,7 @@ def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
     at = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, 2000)))
     result = []
     for rational in (False, True):
-        curve, report = dn.fit_curve(points, 3, FIT_CONTROL, rational, full_output=True)
+        curve, report = dn.fit_curve(points, FIT_CONTROL, 3, rational=rational, full_output=True)
         name = (
             f"{15 + rational}. fit_curve, {FIT_POINTS} noisy points of a rational cubic, "
             f"{FIT_CONTROL} control points, {'rational' if rational else 'non-rational'}: "
@@ -177,7 +177,7 @@ def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
                 {
                     "diffnurbs": Impl(
                         lambda rational=rational: _ready(
-                            dn.fit_curve(points, 3, FIT_CONTROL, rational)
+                            dn.fit_curve(points, FIT_CONTROL, 3, rational=rational)
                         ),
                         FIT_POINTS,
                         np.asarray(curve(at)),

@@ -89,7 +89,7 @@ def kinematic_sweep_case(rng: np.random.Generator) -> Case:
     t = np.linspace(0.0, 1.0, 8)
     path_points = np.stack([4 * t, np.sin(2 * math.pi * t), 0.3 * t**2], axis=1)
     path = dn.NURBSCurve(path_points + 0.01 * rng.standard_normal(path_points.shape), 3)
-    sweep = dn.kinematic_sweep(profile, path, frame="rmf")
+    sweep = dn.KinematicSweep(profile, path, frame="rmf")
     us = jnp.linspace(0.0, 1.0, SWEEP_SIDE)
     vs = jnp.linspace(0.0, 1.0, SWEEP_SIDE)
     grid = jax.jit(lambda s: s.grid(us, vs))

@@ -13,11 +13,12 @@ os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0.2")
 import jax
 import pytest
 
+from diffnurbs_course import use_headless_defaults
+
 # Tests compare against float64 oracles; the library itself never touches this flag.
 jax.config.update("jax_enable_x64", True)
 # Notebooks executed by the tests render pyvista figures to static images, as under `make test`.
-os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+use_headless_defaults()
 
 
 @pytest.fixture(autouse=True, scope="module")

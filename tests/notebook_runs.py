@@ -1,6 +1,6 @@
 """One execution per notebook per test run, shared by the notebook and grading tests.
 
-`test_notebooks.py` (does it run?) and `test_grading.py` (does it score?) look at the same
+`test_notebooks.py` (does it run?) and `test_dc.py` (does it score?) look at the same
 grading run of each master and exercise. Under pytest-xdist they may land on different workers,
 so runs are cached in a folder shared by the whole run, behind a per-notebook file lock: the
 first test executes the notebook, the other reads the result.
@@ -18,12 +18,18 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from diffnurbs import _course, grading
+import diffnurbs_course as dc
 
 GRADING_TIMEOUT = 900
 """Generous limit for the course's own notebooks: a hang fails the test instead of blocking CI."""
 
-TIMES_TABLE = _course.BUILD_DIR / "notebook_times.md"
+ROOT = Path(__file__).resolve().parents[1]
+"""The repository root."""
+
+LAYOUT = dc.CourseLayout(ROOT)
+"""The repository's course folders."""
+
+TIMES_TABLE = LAYOUT.build / "notebook_times.md"
 
 
 def shared_dir(tmp_path_factory) -> Path:
@@ -59,7 +65,7 @@ def _key(path: Path) -> str:
     return f"{path.parent.name}-{path.stem}"
 
 
-def graded(path: Path, master: Path, shared: Path) -> grading.GradeResult:
+def graded(path: Path, master: Path, shared: Path) -> dc.GradeResult:
     """The grading run of a notebook against a master, executed once per test run.
 
     **Arguments:**
@@ -75,9 +81,9 @@ def graded(path: Path, master: Path, shared: Path) -> grading.GradeResult:
     cache = shared / f"{_key(path)}.json"
     with locked(shared / f"{_key(path)}.lock"):
         if cache.exists():
-            return grading.GradeResult.from_json(json.loads(cache.read_text()))
-        result = grading.grade_notebook(
-            path, grading.load_master(master), timeout=GRADING_TIMEOUT, label=str(path)
+            return dc.GradeResult.from_json(json.loads(cache.read_text()))
+        result = dc.grade_notebook(
+            path, dc.load_master(master), timeout=GRADING_TIMEOUT, label=str(path)
         )
         result.executed = None
         cache.write_text(json.dumps(result.to_json()))
@@ -97,7 +103,7 @@ def record_time(shared: Path, path: Path, seconds: float, how: str) -> None:
     """
     rows = shared / "times"
     rows.mkdir(exist_ok=True)
-    row = {"notebook": str(path.relative_to(_course.REPO_ROOT)), "seconds": seconds, "how": how}
+    row = {"notebook": str(path.relative_to(ROOT)), "seconds": seconds, "how": how}
     (rows / f"{_key(path)}.json").write_text(json.dumps(row))
     with locked(shared / "times.lock"):
         _write_table([json.loads(p.read_text()) for p in sorted(rows.glob("*.json"))])
@@ -136,11 +142,11 @@ def answered(master: Path, work: Path):
 
     The notebook (what a student who solved everything hands in).
     """
-    assigned = _course.assign(master, work / "assigned")
-    student = _course.read_notebook(assigned.student)
-    solved = _course.read_notebook(assigned.autograder)
+    assigned = dc.assign(master, work / "assigned")
+    student = dc.read_notebook(assigned.student)
+    solved = dc.read_notebook(assigned.autograder)
     assert len(student.cells) == len(solved.cells), "answers must be code cells"
     for cell, solution in zip(student.cells, solved.cells, strict=True):
-        if _course.ANSWER_TAG in cell.metadata.get("tags", []):
+        if dc.ANSWER_TAG in cell.metadata.get("tags", []):
             cell.source = solution.source
     return student

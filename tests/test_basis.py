@@ -156,3 +156,42 @@ def test_domain_end_repeated_inside_an_unclamped_knot_vector():
     points = np.random.default_rng(0).normal(size=(14, 2))
     curve = dn.NURBSCurve(points, 3, knots)
     np.testing.assert_allclose(curve(3.0), points[11], atol=1e-14)
+
+
+BASIS_CALLS = {
+    "find_span": dn.find_span,
+    "basis_funs": dn.basis_funs,
+    "ders_basis_funs": lambda knots, degree, u: dn.ders_basis_funs(knots, degree, u, 1),
+    "basis_matrix": dn.basis_matrix,
+}
+
+
+@pytest.mark.parametrize("name", BASIS_CALLS)
+def test_basis_functions_reject_bad_concrete_input(name):
+    # basis_matrix returned rows with negative entries, not summing to one, for these.
+    call = BASIS_CALLS[name]
+    u = np.array([0.1, 0.6])
+    decreasing = r"non-decreasing, got knots\[4\] = 0.3 < knots\[3\] = 0.5"
+    with pytest.raises(ValueError, match=decreasing):
+        call([0, 0, 0, 0.5, 0.3, 1, 1, 1.0], 2, u)
+    with pytest.raises(ValueError, match=r"u must lie in the domain \[0.0, 1.0\], got 1.5"):
+        call([0, 0, 0, 0.5, 1, 1, 1.0], 2, np.array([0.2, 1.5]))
+    with pytest.raises(ValueError, match=r"domain \[2.0, 3.0\], got 1.0"):
+        call(np.arange(6.0), 2, np.array([1.0]))  # unclamped: the domain is [knots[p], knots[-p-1]]
+    with pytest.raises(ValueError, match=r"at least 2 \(p \+ 1\) = 6 knots for degree 2, got 5"):
+        call([0, 0, 0.5, 1, 1.0], 2, u)
+    with pytest.raises(ValueError, match="at most degree \\+ 1 = 3 times"):
+        call([0, 0, 0, 0.5, 0.5, 0.5, 0.5, 1, 1, 1.0], 2, u)
+    with pytest.raises(ValueError, match="u must be finite"):
+        call([0, 0, 0, 0.5, 1, 1, 1.0], 2, np.array([np.nan]))
+
+
+def test_basis_matrix_outside_the_domain_under_jit():
+    # Traced parameters are not checked: outside the domain a row holds the polynomial
+    # pieces of the first or last span, as scipy's BSpline extrapolates them.
+    knots = np.array([0.0, 0, 0, 0.3, 0.5, 1, 1, 1])
+    u = jnp.asarray([-0.2, 0.0, 0.4, 1.0, 1.3])
+    matrix = jax.jit(dn.basis_matrix, static_argnums=1)(knots, 2, u)
+    expected = [BSpline(knots, np.eye(5)[i], 2, extrapolate=True)(u) for i in range(5)]
+    np.testing.assert_allclose(matrix, np.stack(expected, axis=1), atol=1e-14)
+    np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-14)

@@ -19,7 +19,7 @@ def power_row(t, n):
 def test_bezier_matrix_cubic_is_the_seed_matrix():
     expected = [[-1, 3, -3, 1], [3, -6, 3, 0], [-3, 3, 0, 0], [1, 0, 0, 0]]
     np.testing.assert_array_equal(dn.bezier_matrix(3), expected)
-    np.testing.assert_array_equal(dn.cubic_basis_matrix("bezier"), expected)
+    np.testing.assert_array_equal(dn.cubic_matrix("bezier"), expected)
 
 
 @pytest.mark.parametrize("degree", [0, 1, 2, 5, 9])

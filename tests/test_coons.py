@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import diffnurbs as dn
-from diffnurbs._coons import CoonsPatch, bilinear_patch, coons
+from diffnurbs import CoonsPatch, bilinear_patch
 
 rng = np.random.default_rng(2)
 T = np.array([0.0, 0.13, 0.5, 0.77, 1.0])
@@ -72,7 +72,7 @@ _on_unit_all = eqx.filter_jit(lambda curves, t: [_on_unit(c, t) for c in curves]
 
 def test_coons_reproduces_the_boundary_curves():
     c0, c1, d0, d1 = _random_boundary()
-    patch = coons(c0, c1, d0, d1)
+    patch = CoonsPatch(c0, c1, d0, d1)
     assert isinstance(patch, CoonsPatch)
     on_c0, on_c1, on_d0, on_d1 = _on_unit_all((c0, c1, d0, d1), T)
     np.testing.assert_allclose(patch(T, 0.0), on_c0, atol=1e-13)
@@ -86,7 +86,7 @@ def test_coons_reproduces_the_boundary_curves():
 
 def test_coons_interior_is_the_naive_formula_and_grid_matches_call():
     c0, c1, d0, d1 = _random_boundary()
-    patch = coons(c0, c1, d0, d1)
+    patch = CoonsPatch(c0, c1, d0, d1)
     p00, p10, p01, p11 = CORNERS
     u, v = np.meshgrid(T, T, indexing="ij")
     on_c0, on_c1, on_d0, on_d1 = _on_unit_all((c0, c1, d0, d1), T)
@@ -111,7 +111,7 @@ def test_coons_of_straight_edges_is_the_bilinear_patch():
     def line(a, b):
         return dn.NURBSCurve([a, b], 1)
 
-    patch = coons(line(p00, p10), line(p01, p11), line(p00, p01), line(p10, p11))
+    patch = CoonsPatch(line(p00, p10), line(p01, p11), line(p00, p01), line(p10, p11))
     u, v = np.meshgrid(T, T, indexing="ij")
     np.testing.assert_allclose(patch(u, v), bilinear_patch(*CORNERS)(u, v), atol=1e-14)
 
@@ -122,7 +122,7 @@ def test_coons_annular_sector_is_exact():
     inner, outer = dn.arc(1.0, 0.0, math.pi / 2), dn.arc(2.0, 0.0, math.pi / 2)
     left = dn.NURBSCurve([[1.0, 0.0], [2.0, 0.0]], 1)
     right = dn.NURBSCurve([[0.0, 1.0], [0.0, 2.0]], 1)
-    patch = coons(inner, outer, left, right)
+    patch = CoonsPatch(inner, outer, left, right)
     grid = patch.grid(T, T)
     np.testing.assert_allclose(np.linalg.norm(grid, axis=-1), np.broadcast_to(1 + T, (5, 5)))
     np.testing.assert_allclose(grid, (1 + T)[None, :, None] * inner(T)[:, None, :], atol=1e-14)
@@ -138,7 +138,7 @@ def test_coons_of_four_circle_arcs():
     top = dn.arc(r, 3 * q, q, center=(0.0, 1.0))  # from (-1, 2) to (1, 2)
     left = dn.arc(r, 5 * q, 3 * q, center=(0.0, 1.0))  # from (-1, 0) to (-1, 2)
     right = dn.arc(r, -q, q, center=(0.0, 1.0))  # from (1, 0) to (1, 2)
-    patch = coons(bottom, top, left, right, tol=1e-12)
+    patch = CoonsPatch(bottom, top, left, right, tol=1e-12)
     np.testing.assert_allclose(
         patch([0, 1, 0, 1], [0, 0, 1, 1]), [[-1, 0], [1, 0], [-1, 2], [1, 2]], atol=1e-14
     )
@@ -159,7 +159,7 @@ def test_coons_gradient_matches_finite_differences_and_jits():
     def loss(points):
         curve = dn.NURBSCurve(points, c0.degree, c0.knots, c0.weights)
         # The corners move with c0's ends, so a loose tolerance keeps the patch valid.
-        return jnp.sum(coons(curve, c1, d0, d1, tol=1.0)(0.3, 0.6) ** 2)
+        return jnp.sum(CoonsPatch(curve, c1, d0, d1, tol=1.0)(0.3, 0.6) ** 2)
 
     points = c0.control_points
     grad = jax.grad(loss)(points)
@@ -175,7 +175,7 @@ def test_coons_checks_corners_under_tracing():
     @jax.jit
     def build(points):
         curve = dn.NURBSCurve(points, c0.degree, c0.knots, c0.weights)
-        return coons(curve, c1, d0, d1).corners
+        return CoonsPatch(curve, c1, d0, d1).corners
 
     build(c0.control_points)
     with pytest.raises(Exception, match="do not meet"):
@@ -187,7 +187,7 @@ def test_coons_float32():
         left = dn.NURBSCurve(np.array([[1.0, 0.0], [2.0, 0.0]], np.float32), 1)
         right = dn.NURBSCurve(np.array([[0.0, 1.0], [0.0, 2.0]], np.float32), 1)
         inner, outer = dn.arc(1.0, 0.0, math.pi / 2), dn.arc(2.0, 0.0, math.pi / 2)
-        patch = coons(inner, outer, left, right, tol=1e-6)
+        patch = CoonsPatch(inner, outer, left, right, tol=1e-6)
         values = patch.grid(np.float32(T), np.float32(T))
         assert values.dtype == jnp.float32
         np.testing.assert_allclose(np.linalg.norm(values, axis=-1)[0], 1 + T, rtol=1e-6)
@@ -197,20 +197,20 @@ def test_coons_errors():
     c0, c1, d0, d1 = _random_boundary()
     moved = dn.NURBSCurve(d1.control_points.at[0, 0].add(0.01), d1.degree, d1.knots)
     with pytest.raises(ValueError, match=r"corner \(u, v\) = \(1, 0\): c0 at its end and d1"):
-        coons(c0, c1, d0, moved)
+        CoonsPatch(c0, c1, d0, moved)
     with pytest.raises(ValueError, match=r"0\.01 apart"):
-        coons(c0, c1, d0, moved)
+        CoonsPatch(c0, c1, d0, moved)
     flipped = dn.NURBSCurve(c1.control_points[::-1], c1.degree)
     with pytest.raises(ValueError, match=r"corner \(u, v\) = \(0, 1\)"):
-        coons(c0, flipped, d0, d1)
+        CoonsPatch(c0, flipped, d0, d1)
     with pytest.raises(ValueError, match="d0 must be a NURBSCurve"):
-        coons(c0, c1, d0.control_points, d1)
+        CoonsPatch(c0, c1, d0.control_points, d1)
     flat = dn.NURBSCurve(d0.control_points[:, :2], d0.degree, d0.knots)
     with pytest.raises(ValueError, match="same dimension"):
-        coons(c0, c1, flat, d1)
+        CoonsPatch(c0, c1, flat, d1)
     with pytest.raises(ValueError, match="tol must be a number >= 0"):
-        coons(c0, c1, d0, d1, tol=-1.0)
-    patch = coons(c0, c1, d0, d1)
+        CoonsPatch(c0, c1, d0, d1, tol=-1.0)
+    patch = CoonsPatch(c0, c1, d0, d1)
     with pytest.raises(ValueError, match=r"u must lie in the domain \[0.0, 1.0\]"):
         patch(1.5, 0.5)
     with pytest.raises(ValueError, match="v must lie in the domain"):
@@ -221,7 +221,7 @@ def test_coons_errors():
 
 def test_to_nurbs_is_the_same_patch():
     c0, c1, d0, d1 = _random_boundary(rational=False)
-    patch = coons(c0, c1, d0, d1)
+    patch = CoonsPatch(c0, c1, d0, d1)
     surface = patch.to_nurbs()
     assert isinstance(surface, dn.NURBSSurface)
     assert surface.degree == (3, 4)
@@ -230,4 +230,4 @@ def test_to_nurbs_is_the_same_patch():
 
 def test_to_nurbs_refuses_rational_boundaries():
     with pytest.raises(ValueError, match="non-rational boundary curves"):
-        coons(*_random_boundary()).to_nurbs()
+        CoonsPatch(*_random_boundary()).to_nurbs()

@@ -158,13 +158,13 @@ def test_errors():
         ffd(points, lattice[..., :1], *BOX_2D)
     with pytest.raises(ValueError, match="lattice must have shape"):
         ffd(points, np.zeros((2, 2, 2, 2)), *BOX_2D)
-    with pytest.raises(ValueError, match="at least 2 points along each axis"):
+    with pytest.raises(ValueError, match="at least p \\+ 1 = 2 lattice points along axis 0"):
         ffd(points, lattice[:1], *BOX_2D)
     with pytest.raises(ValueError, match="lattice must be finite"):
         ffd(points, lattice.at[0, 0, 0].set(np.nan), *BOX_2D)
-    with pytest.raises(ValueError, match="degrees must be a tuple of 2 ints"):
+    with pytest.raises(ValueError, match="degree must be a tuple of 2 ints"):
         ffd_lattice(*BOX_2D, (2, 2, 2))
-    with pytest.raises(ValueError, match=r"degrees\[1\] must be >= 1"):
+    with pytest.raises(ValueError, match=r"degree\[1\] must be >= 1"):
         ffd_lattice(*BOX_2D, (2, 0))
     with pytest.raises(ValueError, match="the box must be 2D or 3D"):
         ffd_lattice([0.0], [1.0], (2,))

@@ -52,7 +52,7 @@ def test_rational_quadratic_recovers_a_circular_arc_exactly(rng):
     theta = arc_angles(rng)
     points = np.column_stack([np.cos(theta), np.sin(theta)])
     curve, report = dn.fit_curve(
-        points, 2, 3, rational=True, correct_parameters=True, full_output=True
+        points, 3, 2, rational=True, correct_parameters=True, full_output=True
     )
     radius_error = np.abs(np.linalg.norm(curve(CHECK), axis=1) - 1).max()
     assert radius_error <= 1e-10
@@ -62,7 +62,7 @@ def test_rational_quadratic_recovers_a_circular_arc_exactly(rng):
     np.testing.assert_allclose(curve.weights, [1.0, 0.5, 1.0], atol=1e-9)
     np.testing.assert_allclose(curve.control_points[1], [1.0, np.sqrt(3)], atol=1e-9)
     # The polynomial quadratic with the same control count, parameters corrected too.
-    poly = dn.fit_curve(points, 2, 3, correct_parameters=True)
+    poly = dn.fit_curve(points, 3, 2, correct_parameters=True)
     assert not poly.rational
     poly_error = np.abs(np.linalg.norm(poly(CHECK), axis=1) - 1).max()
     assert poly_error > 1e6 * max(radius_error, 1e-16)
@@ -73,10 +73,10 @@ def test_rational_quadratic_recovers_an_elliptic_arc_exactly(rng):
     a, b, phase = 2.0, 0.7, 0.4
     theta = arc_angles(rng) + phase
     points = np.column_stack([a * np.cos(theta), b * np.sin(theta)])
-    curve = dn.fit_curve(points, 2, 3, rational=True, correct_parameters=True)
+    curve = dn.fit_curve(points, 3, 2, rational=True, correct_parameters=True)
     x, y = np.asarray(curve(CHECK)).T
     assert np.abs((x / a) ** 2 + (y / b) ** 2 - 1).max() <= 1e-10
-    poly = dn.fit_curve(points, 2, 3, correct_parameters=True)
+    poly = dn.fit_curve(points, 3, 2, correct_parameters=True)
     x, y = np.asarray(poly(CHECK)).T
     assert np.abs((x / a) ** 2 + (y / b) ** 2 - 1).max() > 1e-3
 
@@ -93,8 +93,8 @@ def test_recovers_a_known_curve_from_its_samples_with_its_knots(rng, rational):
     points = truth(u)
     curve, report = dn.fit_curve(
         points,
-        degree,
         n_control,
+        degree,
         rational=rational,
         parametrization=u,
         full_output=True,
@@ -117,7 +117,7 @@ def test_never_worse_than_the_starting_guess_and_report_recomputed(rng, rational
     u0 = np.asarray(dn.parametrize(points))
     start_rms = np.sqrt(np.mean(np.sum((np.asarray(start(u0)) - points) ** 2, -1)))
     curve, report = dn.fit_curve(
-        points, 2, 3, rational=rational, correct_parameters=correct, full_output=True
+        points, 3, 2, rational=rational, correct_parameters=correct, full_output=True
     )
     weights = np.ones(3) if curve.weights is None else np.asarray(curve.weights)
     u = np.asarray(report.parameters)
@@ -134,9 +134,9 @@ def test_never_worse_than_the_starting_guess_and_report_recomputed(rng, rational
 
 def test_parameter_correction_reduces_the_residual_to_orthogonal_errors(rng):
     points = noisy_arc(rng)
-    fixed, fixed_report = dn.fit_curve(points, 2, 3, rational=True, full_output=True)
+    fixed, fixed_report = dn.fit_curve(points, 3, 2, rational=True, full_output=True)
     curve, report = dn.fit_curve(
-        points, 2, 3, rational=True, correct_parameters=True, full_output=True
+        points, 3, 2, rational=True, correct_parameters=True, full_output=True
     )
     assert float(report.rms_residual) < 0.5 * float(fixed_report.rms_residual)
 
@@ -168,7 +168,7 @@ def test_gradient_with_respect_to_the_points_matches_finite_differences(rng, opt
 
     def loss(q):
         # A tight tol: the finite differences divide the solver's error by the step.
-        curve = dn.fit_curve(q, 2, tol=1e-12, **options)
+        curve = dn.fit_curve(q, degree=2, tol=1e-12, **options)
         return jnp.sum(jnp.sin(3 * curve(at)))
 
     grad = np.asarray(jax.grad(loss)(points))
@@ -186,7 +186,7 @@ def test_gradient_with_respect_to_the_points_matches_finite_differences(rng, opt
 @pytest.mark.parametrize(
     "kwargs, message",
     [
-        (dict(points=np.zeros((2, 2)), n_control=3), "at least 3 points"),
+        (dict(points=np.zeros((2, 2)), n_control=3), r"at most 2 control points \(the number of"),
         (dict(n_control=2), "control points"),
         (dict(points=np.full((20, 2), np.nan)), "finite"),
         (dict(degree=0, rational=True), "degree"),

@@ -85,7 +85,7 @@ def test_polynomials_are_reproduced(rng):
         return t**3 - 2 * t**2 + t - 1
 
     curve, report = dn.fit_function(f, -1.0, 2.0, 1e-10, full_output=True)
-    assert report.degree == 3 and report.iterations == 3  # degrees 1, 2, 3 tried, no refinement
+    assert report.degree == 3 and report.steps == 3  # degrees 1, 2, 3 tried, no refinement
     assert independent_error(curve, f, -1.0, 2.0, rng) <= 1e-12
 
 
@@ -94,7 +94,7 @@ def test_a_straight_line_stays_linear(rng):
         return 2.0 * t - 1.0
 
     curve, report = dn.fit_function(f, 0.0, 1.0, 1e-12, full_output=True)
-    assert (report.degree, report.n_control, report.iterations) == (1, 2, 1)
+    assert (report.degree, report.n_control, report.steps) == (1, 2, 1)
     assert report.features.shape == (0,)
     assert independent_error(curve, f, 0.0, 1.0, rng) <= 1e-13
 
@@ -117,7 +117,7 @@ def test_a_jump_cannot_be_fitted():
         return jnp.where(t < 0.5, 0.0, 1.0)
 
     with pytest.raises(RuntimeError, match=r"did not reach tol = 0\.001"):
-        dn.fit_function(step, 0.0, 1.0, 1e-3, max_iterations=12)
+        dn.fit_function(step, 0.0, 1.0, 1e-3, max_steps=12)
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,7 @@ import pytest
 from helpers import random_curve
 
 import diffnurbs as dn
-from diffnurbs._frames import KinematicSweep, frames, kinematic_sweep
+from diffnurbs import KinematicSweep, frames
 
 V = np.linspace(0.0, 1.0, 101)
 EZ = np.array([0.0, 0.0, 1.0])
@@ -163,7 +163,7 @@ def test_circle_swept_along_a_line_is_a_cylinder(frame):
     radius, axis = 0.7, np.array([1.0, -2.0, 0.5])
     profile = dn.circle(radius)
     path = dn.NURBSCurve(np.outer([0.0, 0.3, 0.8, 1.0], axis) + 1.0, 3)
-    surface = kinematic_sweep(profile, path, frame)
+    surface = KinematicSweep(profile, path, frame)
     u, v = np.meshgrid(np.linspace(0, 1, 33), np.linspace(0, 1, 17), indexing="ij")
     points = np.asarray(surface(u, v))
     offset = points - np.asarray(path(v))
@@ -180,7 +180,7 @@ def test_3d_profile_follows_the_seed_convention():
     rng = np.random.default_rng(11)
     profile = random_curve(rng, 3, n_control=6, dim=3)
     path = dn.circle(2.0, center=(0.0, 0.0, 0.0))
-    surface = kinematic_sweep(profile, path)
+    surface = KinematicSweep(profile, path)
     u = np.linspace(0, 1, 21)
     np.testing.assert_allclose(surface(u, 0.0), profile(u), atol=1e-12)
     v = np.linspace(0, 1, 13)
@@ -201,7 +201,7 @@ def test_gradients_wrt_the_path_are_finite_and_match_finite_differences():
 
     def loss(points):
         moved = dn.NURBSCurve(points, path.degree, path.knots, path.weights)
-        return jnp.sum(kinematic_sweep(profile, moved).grid(us, vs) ** 2)
+        return jnp.sum(KinematicSweep(profile, moved).grid(us, vs) ** 2)
 
     grad = np.asarray(jax.jit(jax.grad(loss))(path.control_points))
     assert np.all(np.isfinite(grad)) and np.any(grad != 0)
@@ -229,7 +229,7 @@ def test_float32():
         np.asarray(circle.knots, np.float32),
         np.asarray(circle.weights, np.float32),
     )
-    grid = kinematic_sweep(profile, path).grid(
+    grid = KinematicSweep(profile, path).grid(
         np.linspace(0, 1, 5, dtype=np.float32), T_HELIX[:4].astype(np.float32)
     )
     assert grid.dtype == jnp.float32 and np.all(np.isfinite(grid))
@@ -245,12 +245,12 @@ def test_errors():
     with pytest.raises(ValueError, match="must lie in the domain"):
         frames(space, 1.5)
     with pytest.raises(ValueError, match="path must be a curve in 3D"):
-        kinematic_sweep(space, planar)
+        KinematicSweep(space, planar)
     with pytest.raises(ValueError, match="unknown frame kind"):
-        kinematic_sweep(planar, space, "bishop")
+        KinematicSweep(planar, space, "bishop")
     with pytest.raises(ValueError, match="profile must be a curve in 2D or 3D, got dim = 4"):
         KinematicSweep(dn.circle(1.0, center=(0.0,) * 4), space)
     with pytest.raises(ValueError, match="profile must be a curve in 2D or 3D, got dim = 1"):
-        kinematic_sweep(dn.NURBSCurve([[0.0], [1.0]], 1), space)
+        KinematicSweep(dn.NURBSCurve([[0.0], [1.0]], 1), space)
     with pytest.raises(ValueError, match="us must have 1 dimensions"):
-        kinematic_sweep(planar, space).grid(np.zeros((2, 2)), np.zeros(2))
+        KinematicSweep(planar, space).grid(np.zeros((2, 2)), np.zeros(2))

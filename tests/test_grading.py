@@ -2,23 +2,24 @@
 
 import csv
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import nbformat
 import pytest
-from notebook_runs import DEMO_MASTER, answered, graded, shared_dir
+from notebook_runs import DEMO_MASTER, LAYOUT, ROOT, answered, graded, shared_dir
 
-from diffnurbs import _course, grading
+import diffnurbs_course as dc
 
-SOLUTIONS = _course.notebooks(_course.SOLUTIONS_DIR)
-EXERCISES = _course.notebooks(_course.EXERCISES_DIR)
+SOLUTIONS = dc.notebooks(LAYOUT.solutions)
+EXERCISES = dc.notebooks(LAYOUT.exercises)
 DEMO_EXERCISE = DEMO_MASTER.parents[1] / "exercises" / DEMO_MASTER.name
 
 
 def _id(path: Path) -> str:
-    return str(path.relative_to(_course.REPO_ROOT))
+    return str(path.relative_to(ROOT))
 
 
 def _answer_cell(nb, needle: str):
@@ -57,7 +58,7 @@ def _grade(work: Path, *options: str, header=("file", "q1", "q2", "total", "max"
     """Run `diffnurbs-grade` on `work/submissions`; return the CSV rows by file."""
     scores = work / "scores.csv"
     argv = [str(work / "submissions"), "-o", str(scores), "--solutions", str(DEMO_MASTER.parent)]
-    assert grading.main([*argv, *options]) == 0
+    assert dc.main([*argv, *options]) == 0
     with open(scores, newline="") as f:
         rows = list(csv.DictReader(f))
     with open(scores, newline="") as f:
@@ -116,24 +117,38 @@ def test_unmatched_notebook_gets_an_empty_row(tmp_path):
     assert _scores(rows["homework.ipynb"]) == (None, None, 0, None)
 
 
+def test_default_solutions_folder(tmp_path, monkeypatch):
+    (tmp_path / "course" / "solutions").mkdir(parents=True)
+    shutil.copyfile(DEMO_MASTER, tmp_path / "course" / "solutions" / DEMO_MASTER.name)
+    assert dc.find_solutions(tmp_path / "course") == tmp_path / "course" / "solutions"
+    assert dc.find_solutions(cwd=tmp_path / "course") == tmp_path / "course" / "solutions"
+    monkeypatch.chdir(tmp_path / "course")
+    assert dc.find_solutions().resolve() == (tmp_path / "course" / "solutions").resolve()
+    with pytest.raises(FileNotFoundError, match=r"solutions/\*\.ipynb \(does not exist\)"):
+        dc.find_solutions(tmp_path)
+    (tmp_path / "solutions").mkdir()
+    with pytest.raises(FileNotFoundError, match="holds no"):
+        dc.find_solutions(cwd=tmp_path)
+
+
 def test_match_master():
     names = ["02_bezier_curves", "12_surfaces_of_motion"]
     nb = nbformat.v4.new_notebook()
-    assert grading.match_master(Path("02_bezier_curves.ipynb"), nb, names) == "02_bezier_curves"
-    assert grading.match_master(Path("bob-02_bezier_curves (1).ipynb"), None, names) == (
+    assert dc.match_master(Path("02_bezier_curves.ipynb"), nb, names) == "02_bezier_curves"
+    assert dc.match_master(Path("bob-02_bezier_curves (1).ipynb"), None, names) == (
         "02_bezier_curves"
     )
     nb.metadata["otter"] = {"assignment_name": "12_surfaces_of_motion"}
-    assert grading.match_master(Path("copy.ipynb"), nb, names) == "12_surfaces_of_motion"
-    assert grading.match_master(Path("copy.ipynb"), None, names) is None
+    assert dc.match_master(Path("copy.ipynb"), nb, names) == "12_surfaces_of_motion"
+    assert dc.match_master(Path("copy.ipynb"), None, names) is None
 
 
 def test_csv_columns_span_every_master(tmp_path):
-    a = grading.GradeResult("a.ipynb", "A", {"q1": 1.0, "q2": 0.5}, {"q1": 1.0, "q2": 1.0})
-    b = grading.GradeResult(
+    a = dc.GradeResult("a.ipynb", "A", {"q1": 1.0, "q2": 0.5}, {"q1": 1.0, "q2": 1.0})
+    b = dc.GradeResult(
         "b.ipynb", "B", {"q1": 2.0, "q2": 0.0, "q3": 1 / 3}, dict.fromkeys(["q1", "q2", "q3"], 2.0)
     )
-    grading.write_csv([a, b], tmp_path / "s.csv")
+    dc.write_csv([a, b], tmp_path / "s.csv")
     lines = (tmp_path / "s.csv").read_text().splitlines()
     assert lines == [
         "file,q1,q2,q3,total,max",
@@ -159,7 +174,7 @@ def test_master_scores_full_marks(path, tmp_path_factory):
 
 @pytest.mark.parametrize("path", EXERCISES, ids=_id)
 def test_blank_exercise_scores_zero(path, tmp_path_factory):
-    master = _course.SOLUTIONS_DIR / path.name
+    master = LAYOUT.solutions / path.name
     if not master.exists():
         pytest.fail(f"{_id(path)} has no master")
     result = graded(path, master, shared_dir(tmp_path_factory))

@@ -2,7 +2,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import nine_point_circle, random_curve, random_surface
+from helpers import naive_curve, naive_surface, nine_point_circle, random_curve, random_surface
 
 import diffnurbs as dn
 
@@ -40,9 +40,9 @@ def test_surface_insertion_and_decomposition(direction):
     rng = np.random.default_rng(3)
     surface = random_surface(rng, (2, 3), counts=(5, 6))
     u, v = rng.uniform(size=100), rng.uniform(size=100)
-    inserted = surface.insert_knot(0.61, direction, times=2)
+    inserted = surface.insert_knot(0.61, times=2, direction=direction)
     np.testing.assert_allclose(inserted(u, v), surface(u, v), atol=1e-12)
-    refined = surface.refine([0.2, 0.2, 0.9], direction)
+    refined = surface.refine([0.2, 0.2, 0.9], direction=direction)
     np.testing.assert_allclose(refined(u, v), surface(u, v), atol=1e-12)
     for row in surface.decompose():
         for patch in row:
@@ -76,7 +76,7 @@ def test_bad_insertions():
     with pytest.raises(ValueError, match="clamped end knots"):
         dn.NURBSCurve(np.zeros((4, 2)), 2, [0, 1, 2, 3, 4, 5, 6]).decompose()
     with pytest.raises(ValueError, match='direction must be "u" or "v"'):
-        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).insert_knot(0.5, "w")
+        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).insert_knot(0.5, direction="w")
 
 
 @pytest.mark.parametrize("degree, times", [(1, 1), (2, 1), (3, 2)])
@@ -115,7 +115,7 @@ def test_elevating_a_bezier_curve_matches_the_closed_form():
 def test_surface_degree_elevation(direction):
     rng = np.random.default_rng(8)
     surface = random_surface(rng, (2, 1), counts=(4, 3))
-    elevated = surface.elevate_degree(2, direction)
+    elevated = surface.elevate_degree(2, direction=direction)
     expected = (4, 1) if direction == "u" else (2, 3)
     assert elevated.degree == expected
     u, v = rng.uniform(size=200), rng.uniform(size=200)
@@ -139,7 +139,130 @@ def test_degree_elevation_rejects_bad_times():
     with pytest.raises(ValueError, match="times"):
         curve.elevate_degree(0)
     with pytest.raises(ValueError, match="direction"):
-        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).elevate_degree(1, "w")
+        dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2)).elevate_degree(1, direction="w")
+
+
+UNCLAMPED_KNOTS = {
+    # 0, 1, ..., n + p: p knots beyond each end of the domain [p, n + 1].
+    "uniform": lambda n_control, p: np.arange(n_control + p + 1.0),
+    # Ends of multiplicity 1 and 2 (p >= 2), a double interior knot, uneven spans.
+    "mixed": lambda n_control, p: np.r_[
+        np.linspace(-1.0, -0.1, p),
+        [0.0, 0.3, 0.3],
+        np.linspace(0.45, 0.9, n_control - p - 3),
+        [1.0, 1.0],
+        np.linspace(1.4, 2.5, p - 1),
+    ],
+}
+
+
+@pytest.mark.parametrize(
+    "kind, degree, times",
+    [("uniform", 1, 1), ("uniform", 2, 1), ("uniform", 3, 2), ("mixed", 2, 1), ("mixed", 3, 2)],
+)
+@pytest.mark.parametrize("rational", [False, True])
+def test_degree_elevation_of_unclamped_knots(kind, degree, times, rational):
+    # Knots beyond the domain: collocation in the elevated space had basis functions
+    # without a site (NaN or wrong control points, negative weights).
+    rng = np.random.default_rng(100 + 10 * degree + times + 5 * rational)
+    n_control = degree + 6
+    knots = UNCLAMPED_KNOTS[kind](n_control, degree)
+    weights = rng.uniform(0.3, 3.0, n_control) if rational else None
+    curve = dn.NURBSCurve(rng.normal(size=(n_control, 3)), degree, knots, weights)
+    elevated = curve.elevate_degree(times)
+    assert elevated.degree == degree + times
+    assert elevated.rational == rational
+    a, b = knots[degree], knots[-degree - 1]
+    np.testing.assert_array_equal(elevated.domain, (a, b))
+    u = np.linspace(a, b, 801)
+    # The oracle: the Cox-de Boor recursion on the original knots (helpers.naive_curve).
+    np.testing.assert_allclose(elevated(u), naive_curve(curve, u), atol=1e-12)
+    if rational:
+        assert np.all(np.asarray(elevated.weights) > 0)
+    # The result is clamped; inside the domain every knot appears `times` more often.
+    inside = knots[(knots > a) & (knots < b)]
+    values, counts = np.unique(inside, return_counts=True)
+    expected = np.r_[[a] * (degree + times + 1), np.repeat(values, counts + times)]
+    expected = np.r_[expected, [b] * (degree + times + 1)]
+    np.testing.assert_array_equal(elevated.knots, expected)
+
+
+def test_degree_elevation_across_a_discontinuity():
+    # An interior knot of multiplicity p + 1 splits the curve in two: each piece is elevated
+    # on its own (collocation across it had two sites at the same place).
+    rng = np.random.default_rng(31)
+    knots = [0, 0, 0, 0.4, 0.4, 0.4, 0.7, 1, 1, 1.0]
+    curve = dn.NURBSCurve(rng.normal(size=(7, 2)), 2, knots, rng.uniform(0.5, 2.0, 7))
+    elevated = curve.elevate_degree(2)
+    u = np.r_[np.linspace(0, 1, 401), np.nextafter(0.4, 0)]
+    np.testing.assert_allclose(elevated(u), naive_curve(curve, u), atol=1e-12)
+    np.testing.assert_array_equal(np.unique(elevated.knots, return_counts=True)[1], [5, 5, 3, 5])
+
+
+@pytest.mark.parametrize("rational", [False, True])
+def test_degree_elevation_matches_splipy_control_points(rational):
+    # splipy raises the order of clamped splines explicitly (Huang, Hu and Martin's
+    # derivative algorithm), on the same knot vector: the control points must agree.
+    from splipy import BSplineBasis, Curve
+
+    rng = np.random.default_rng(32 + rational)
+    knots = [0, 0, 0, 0, 0.2, 0.5, 0.5, 0.7, 1, 1, 1, 1.0]
+    weights = rng.uniform(0.3, 3.0, 8) if rational else None
+    curve = dn.NURBSCurve(rng.normal(size=(8, 3)), 3, knots, weights)
+    for times in (1, 2):
+        elevated = curve.elevate_degree(times)
+        oracle = Curve(BSplineBasis(4, knots), np.asarray(curve.homogeneous_points()), rational)
+        oracle.raise_order(times)
+        np.testing.assert_allclose(elevated.knots, oracle.knots(0, with_multiplicities=True))
+        np.testing.assert_allclose(elevated.homogeneous_points(), oracle.controlpoints, atol=1e-12)
+
+
+def test_degree_elevation_of_splipy_periodic_rational_curve():
+    # splipy's periodic test curve (its test_periodic_split): a rational cubic, C2 across
+    # the seam, control points in projective form (w x, w y, w). splipy elevates it as a
+    # periodic spline, which is the oracle here.
+    from splipy import BSplineBasis, Curve
+
+    xyw = [(1, 0, 1), (1, 1, 0.7), (0, 1, 0.89), (-1, 1, 0.5), (-1, 0, 1), (-1, -0.5, 1)]
+    projective = np.array([*xyw, (1, -0.5, 1)])
+    knots = np.array([-3, -2, -1, 0, 1, 2, 2.5, 4, 5, 6, 7, 8, 9, 9.5])
+    oracle = Curve(BSplineBasis(4, knots, 2), projective, rational=True)
+    wrapped = np.concatenate([projective, projective[:3]])  # continuity 2: three repeat
+    curve = dn.NURBSCurve(wrapped[:, :2] / wrapped[:, 2:], 3, knots, wrapped[:, 2])
+    u = np.linspace(0.0, 7.0, 701)
+    np.testing.assert_allclose(curve(u), oracle(u), atol=1e-12)
+    elevated = curve.elevate_degree(2)
+    assert elevated.degree == 5
+    np.testing.assert_allclose(elevated(u), oracle.raise_order(2)(u), atol=1e-12)
+    np.testing.assert_allclose(elevated(u), curve(u), atol=1e-12)
+
+
+def test_degree_elevation_of_an_unclamped_circle():
+    # splipy's test circle (its test_insert_knot): knots -1, 0, 0, 1, 1, ..., 4, 4, 5, the
+    # first and last beyond the domain [0, 4]. (splipy's own raise_order gives NaN here.)
+    s = np.sqrt(0.5)
+    square = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0)]
+    weights = np.tile([1, s], 5)[:9]
+    knots = [-1, 0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5]
+    curve = dn.NURBSCurve(np.array(square, float), 2, knots, weights)
+    u = np.linspace(0.0, 4.0, 401)
+    for times in (1, 3):
+        elevated = curve.elevate_degree(times)
+        np.testing.assert_allclose(np.linalg.norm(elevated(u), axis=-1), 1.0, atol=1e-12)
+        np.testing.assert_allclose(elevated(u), naive_curve(curve, u), atol=1e-12)
+
+
+@pytest.mark.parametrize("direction", ["u", "v"])
+def test_surface_degree_elevation_of_unclamped_knots(direction):
+    rng = np.random.default_rng(33)
+    knots = (np.arange(9.0), np.arange(8.0))  # degrees (3, 2): 5 x 5 control points
+    surface = dn.NURBSSurface(
+        rng.normal(size=(5, 5, 3)), (3, 2), knots, rng.uniform(0.3, 3.0, (5, 5))
+    )
+    elevated = surface.elevate_degree(1, direction=direction)
+    assert elevated.degree == ((4, 2) if direction == "u" else (3, 3))
+    u, v = rng.uniform(3, 5, 200), rng.uniform(2, 5, 200)
+    np.testing.assert_allclose(elevated(u, v), naive_surface(surface, u, v), atol=1e-12)
 
 
 def geomdl_insert_all(degree, knots, points, values):

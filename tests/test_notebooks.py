@@ -18,33 +18,33 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from notebook_runs import answered, graded, record_time, shared_dir
+from notebook_runs import LAYOUT, ROOT, answered, graded, record_time, shared_dir
 
-from diffnurbs import _course
+import diffnurbs_course as dc
 
-COURSE = _course.notebooks(_course.COURSE_DIR)
-SOLUTIONS = _course.notebooks(_course.SOLUTIONS_DIR)
-EXERCISES = _course.notebooks(_course.EXERCISES_DIR)
+COURSE = dc.notebooks(LAYOUT.course)
+SOLUTIONS = dc.notebooks(LAYOUT.solutions)
+EXERCISES = dc.notebooks(LAYOUT.exercises)
 DATA = Path(__file__).parent / "data"
 DEMO = [DATA / "solutions" / "99_demo.ipynb", DATA / "exercises" / "99_demo.ipynb"]
 
 
 def _id(path: Path) -> str:
-    return str(path.relative_to(_course.REPO_ROOT))
+    return str(path.relative_to(ROOT))
 
 
 @pytest.mark.parametrize("path", COURSE + SOLUTIONS + EXERCISES + DEMO, ids=_id)
 def test_committed_without_outputs(path):
-    problems = _course.policy_problems(_course.read_notebook(path))
+    problems = dc.policy_problems(dc.read_notebook(path))
     assert not problems, f"{_id(path)}: {problems}; run `.venv/bin/python tools/nbclean.py`"
 
 
 @pytest.mark.parametrize("path", COURSE, ids=_id)
 def test_course_notebook_runs_and_draws(path, tmp_path, tmp_path_factory):
-    nb = _course.read_notebook(path)
-    seconds = _course.execute_notebook(nb, tmp_path, timeout=900)
+    nb = dc.read_notebook(path)
+    seconds = dc.execute_notebook(nb, tmp_path, timeout=900)
     record_time(shared_dir(tmp_path_factory), path, seconds, "executed")
-    assert _course.count_figures(nb) >= 1, f"{_id(path)} shows no figure"
+    assert dc.count_figures(nb) >= 1, f"{_id(path)} shows no figure"
 
 
 @pytest.mark.parametrize("path", SOLUTIONS, ids=_id)
@@ -55,7 +55,7 @@ def test_master_runs(path, tmp_path_factory):
 
 
 def _describe(error: dict) -> str:
-    return _course.CellError(**{**error, "tags": tuple(error["tags"])}).describe()
+    return dc.CellError(**{**error, "tags": tuple(error["tags"])}).describe()
 
 
 def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
@@ -71,9 +71,9 @@ def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
 
     Descriptions of the errors that should not happen.
     """
-    code = [c for c in _course.read_notebook(exercise).cells if c.cell_type == "code"]
+    code = [c for c in dc.read_notebook(exercise).cells if c.cell_type == "code"]
     tags = [cell.metadata.get("tags", []) for cell in code]
-    answers = [i for i, cell_tags in enumerate(tags, start=1) if _course.ANSWER_TAG in cell_tags]
+    answers = [i for i, cell_tags in enumerate(tags, start=1) if dc.ANSWER_TAG in cell_tags]
     first_answer = answers[0] if answers else len(code) + 1
     bad = []
     for error in errors:
@@ -87,7 +87,7 @@ def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
 
 @pytest.mark.parametrize("path", EXERCISES, ids=_id)
 def test_exercise_runs(path, tmp_path_factory):
-    master = _course.SOLUTIONS_DIR / path.name
+    master = LAYOUT.solutions / path.name
     if not master.exists():
         pytest.fail(f"{_id(path)} has no master {_id(master)}")
     result = graded(path, master, shared_dir(tmp_path_factory))
@@ -97,7 +97,7 @@ def test_exercise_runs(path, tmp_path_factory):
 
 def test_kernel_is_this_python(tmp_path):
     nb = nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell("import sys; sys.executable")])
-    _course.execute_notebook(nb, tmp_path)
+    dc.execute_notebook(nb, tmp_path)
     assert nb.cells[0].outputs[0]["data"]["text/plain"] == repr(sys.executable)
 
 
@@ -115,14 +115,14 @@ def test_demo_exercise_in_student_mode(tmp_path):
     """`grader.check` reads the public tests from the notebook file, as in a student's session."""
     (tmp_path / "blank").mkdir()
     shutil.copyfile(DEMO[1], tmp_path / "blank" / DEMO[1].name)
-    blank = _course.read_notebook(DEMO[1])
-    _course.execute_notebook(blank, tmp_path / "blank", allow_errors=True)
+    blank = dc.read_notebook(DEMO[1])
+    dc.execute_notebook(blank, tmp_path / "blank", allow_errors=True)
     assert all("failed" in text for text in _check_outputs(blank).values())
 
     (tmp_path / "solved").mkdir()
     solved = answered(DEMO[0], tmp_path)
     nbformat.write(solved, tmp_path / "solved" / DEMO[1].name)
-    _course.execute_notebook(solved, tmp_path / "solved")
+    dc.execute_notebook(solved, tmp_path / "solved")
     texts = _check_outputs(solved)
     assert set(texts) == {"q1", "q2"}
     assert all("passed" in text for text in texts.values()), texts

@@ -22,7 +22,7 @@ POINTS = np.array([[0.0, 0], [1, 2], [2, 0], [3, 1]])
         ({"weights": [1, np.inf, 1, 1]}, "finite and positive"),
         ({"weights": [1, 1, 1]}, r"weights must have shape \(4,\)"),
         ({"degree": 0}, "degree must be >= 1, got 0"),
-        ({"degree": 4}, "degree 4 needs at least degree \\+ 1 = 5"),
+        ({"degree": 4}, "expected at least p \\+ 1 = 5 control points for degree 4, got 4"),
         ({"degree": 2.0}, "degree must be a Python int"),
         (
             {"control_points": np.array([[0.0, np.nan], [1, 1], [2, 2], [3, 3]])},

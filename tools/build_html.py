@@ -26,8 +26,9 @@ from pathlib import Path
 import nbformat
 from nbconvert import HTMLExporter
 
-from diffnurbs import _course
+import diffnurbs_course as dc
 
+_LAYOUT = dc.CourseLayout(Path(__file__).resolve().parents[1])
 _LINK = re.compile(r"(\]\(|href=[\"'])([^)\"'\s]*?)([\w.-]+)\.ipynb(#[^)\"'\s]*)?")
 
 
@@ -104,10 +105,10 @@ def build_chapter(notebook: Path, out: Path) -> Page:
 
     The `Page` written.
     """
-    nb = _course.read_notebook(notebook)
+    nb = dc.read_notebook(notebook)
     with tempfile.TemporaryDirectory(prefix="diffnurbs-html-") as tmp:
-        seconds = _course.execute_notebook(nb, Path(tmp), allow_errors=True)
-    errors = tuple(error.describe() for error in _course.cell_errors(nb))
+        seconds = dc.execute_notebook(nb, Path(tmp), allow_errors=True)
+    errors = tuple(error.describe() for error in dc.cell_errors(nb))
     rewrite_links(nb, in_exercises=False)
     _export(nb, out / f"{notebook.stem}.html", notebook.parent)
     return Page(notebook.stem, _title(nb, notebook.stem), seconds, errors)
@@ -115,7 +116,7 @@ def build_chapter(notebook: Path, out: Path) -> Page:
 
 def build_exercise(notebook: Path, out: Path) -> Page:
     """Write the page of one exercise notebook, unexecuted (it is the student's starting point)."""
-    nb = _course.read_notebook(notebook)
+    nb = dc.read_notebook(notebook)
     rewrite_links(nb, in_exercises=True)
     _export(nb, out / "exercises" / f"{notebook.stem}.html", notebook.parent)
     return Page(notebook.stem, _title(nb, notebook.stem), 0.0, ())
@@ -170,15 +171,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=Path("build/html"))
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
     args = parser.parse_args(argv)
-    _course.use_headless_defaults()
-    chapters = args.notebooks or _course.notebooks(_course.COURSE_DIR)
+    dc.use_headless_defaults()
+    chapters = args.notebooks or dc.notebooks(_LAYOUT.course)
     args.out.mkdir(parents=True, exist_ok=True)
     spawn = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(max_workers=max(1, args.jobs), mp_context=spawn) as pool:
         pages = list(pool.map(build_chapter, chapters, [args.out] * len(chapters)))
     for page in pages:
         print(f"{page.name}: {page.seconds:.1f} s" + "".join(f"\n  {e}" for e in page.errors))
-    exercises = [build_exercise(p, args.out) for p in _course.notebooks(_course.EXERCISES_DIR)]
+    exercises = [build_exercise(p, args.out) for p in dc.notebooks(_LAYOUT.exercises)]
     index = write_index(pages, exercises, args.out)
     print(f"wrote {index} ({len(pages)} chapter(s), {len(exercises)} exercise notebook(s))")
     return 1 if any(page.errors for page in pages) else 0

@@ -17,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from diffnurbs import _course
+import diffnurbs_course as dc
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -31,21 +31,21 @@ def _parser() -> argparse.ArgumentParser:
 
 def _generate(master: Path, exercises: Path, build: Path) -> bool:
     """Check one master and write its exercise; `False` when the master breaks the rules."""
-    problems = _course.master_problems(master)
+    problems = dc.master_problems(master)
     if problems:
         print(f"{master}: not generated, the master breaks the authoring rules:")
         for problem in problems:
             print(f"  - {problem}")
         return False
     target = exercises / master.name
-    _course.generate_exercise(master, target, build / master.stem)
+    dc.generate_exercise(master, target, build / master.stem)
     print(f"{master} -> {target}")
     return True
 
 
 def _check(master: Path, exercises: Path) -> bool:
     """Report whether one exercise is in sync with its master."""
-    drift = _course.exercise_drift(master, exercises / master.name)
+    drift = dc.exercise_drift(master, exercises / master.name)
     for line in drift:
         print(f"{exercises / master.name}: {line}")
     return not drift
@@ -54,8 +54,8 @@ def _check(master: Path, exercises: Path) -> bool:
 def main(argv: list[str] | None = None) -> int:
     """Generate (or check) every exercise; return the exit status."""
     args = _parser().parse_args(argv)
-    masters = _course.notebooks(args.solutions)
-    stale = [p for p in _course.notebooks(args.exercises) if not (args.solutions / p.name).exists()]
+    masters = dc.notebooks(args.solutions)
+    stale = [p for p in dc.notebooks(args.exercises) if not (args.solutions / p.name).exists()]
     ok = True
     for master in masters:
         if args.check:

@@ -14,9 +14,10 @@ from pathlib import Path
 
 import nbformat
 
-from diffnurbs import _course
+import diffnurbs_course as dc
 
-_DEFAULT_DIRS = (_course.COURSE_DIR, _course.SOLUTIONS_DIR, _course.EXERCISES_DIR)
+_LAYOUT = dc.CourseLayout(Path(__file__).resolve().parents[1])
+_DEFAULT_DIRS = (_LAYOUT.course, _LAYOUT.solutions, _LAYOUT.exercises)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -25,15 +26,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("notebooks", nargs="*", type=Path)
     parser.add_argument("--check", action="store_true", help="only report unclean notebooks")
     args = parser.parse_args(argv)
-    paths = args.notebooks or [p for d in _DEFAULT_DIRS for p in _course.notebooks(d)]
+    paths = args.notebooks or [p for d in _DEFAULT_DIRS for p in dc.notebooks(d)]
     dirty = []
     for path in paths:
-        nb = _course.read_notebook(path)
-        if not _course.policy_problems(nb):
+        nb = dc.read_notebook(path)
+        if not dc.policy_problems(nb):
             continue
         dirty.append(path)
         if not args.check:
-            nbformat.write(_course.clean_notebook(nb), path)
+            nbformat.write(dc.clean_notebook(nb), path)
     verb = "would clean" if args.check else "cleaned"
     for path in dirty:
         print(f"{verb} {path}")

@@ -2,7 +2,10 @@
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
+
+from ._basis import ders_basis_funs
 
 
 def band_rows(rows: Array, first: Array, values: Array, n: int, half: int) -> Array:
@@ -66,3 +69,19 @@ def solve_banded(band: Float[Array, "n 2h+1"], rhs: Float[Array, "n k"]) -> Floa
     x0 = jnp.zeros((half, *rhs.shape[1:]), rhs.dtype)
     _, x = jax.lax.scan(substitute, x0, (upper, y), reverse=True)
     return x
+
+
+def collocation_solve(
+    sites: Array, orders: np.ndarray, knots: Array, degree: int, rhs: Array
+) -> Array:
+    """Control points `P` with `C^(orders[k])(sites[k]) = rhs[k]` for every row `k`.
+
+    The rows must be ordered so that row `k` involves control points `k - p .. k + p`
+    (increasing sites, each derivative row next to its end), which makes the system banded;
+    it is solved by `solve_banded`.
+    """
+    span, ders = ders_basis_funs(knots, degree, sites, int(orders.max()))
+    count = sites.shape[0]
+    funs = ders[np.arange(count), orders]
+    band = band_rows(jnp.arange(count), span - degree, funs, count, degree)
+    return solve_banded(band, rhs)

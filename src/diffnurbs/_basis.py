@@ -3,6 +3,10 @@
 The degree is always a Python int, so the loops below unroll at trace time and every
 function is a fixed expression graph of array operations: `jit`, `vmap` and `grad`
 (with respect to the knots as well as the parameter) work on all of them.
+
+`find_span`, `basis_funs`, `ders_basis_funs` and `basis_matrix` check concrete knots and
+parameters (`check_basis_arguments`) before calling their compiled bodies; traced ones
+pass unchecked, so the checks cost nothing inside `jit`.
 """
 
 import functools
@@ -12,18 +16,22 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from ._validate import check_degree, check_order
+from ._misc import safe_divide
+from ._validate import check_basis_arguments, check_degree, check_order
 
 
-@functools.partial(jax.jit, static_argnums=1)
 def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
     """Index `i` of the knot span `[knots[i], knots[i + 1])` that holds `u`.
 
     The largest `i` in `[degree, n]` with `knots[i] <= u`, where `n = len(knots) - degree - 2`:
-    the last knot belongs to the last non-empty span, a repeated knot starts the span to
-    its right, and parameters outside the domain fall into the first or last span. The
-    search is a binary search written as a loop (a bisection per bit of the index), which
-    XLA keeps as one pass over `u`.
+    the last knot belongs to the last non-empty span, and a repeated knot starts the span
+    to its right. The search is a binary search written as a loop (a bisection per bit of
+    the index), which XLA keeps as one pass over `u`.
+
+    Concrete knots and parameters are checked (`ValueError`): a knot vector of at least
+    `2 p + 2` non-decreasing knots, `u` in the domain `[knots[p], knots[n + 1]]`. Traced
+    ones are not, at no cost to the compiled program; there a parameter outside the
+    domain falls into the first or last span.
 
     **Arguments:**
 
@@ -35,6 +43,13 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
 
     Integer array of the shape of `u`.
     """
+    check_degree(degree, minimum=0)
+    check_basis_arguments(knots, degree, u)
+    return _find_span(knots, degree, u)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _find_span(knots, degree, u):
     knots, u = jnp.asarray(knots), jnp.asarray(u)
     last = knots.shape[0] - degree - 2
     steps = max(last - degree, 0).bit_length()
@@ -50,13 +65,6 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
     return jax.lax.fori_loop(0, steps, bisect, jnp.full(u.shape, degree, dtype=jnp.int32))
 
 
-def _safe_divide(num, den):
-    # The double `where` keeps gradients finite: 0/0 is defined as 0 and the unused
-    # branch never sees a zero denominator.
-    zero = den == 0
-    return jnp.where(zero, 0.0, num / jnp.where(zero, 1.0, den))
-
-
 def _local_knots(knots, degree, span, u):
     """`left[j] = u - U[span + 1 - j]`, `right[j] = U[span + j] - u` for j = 0..p."""
     left = [u - knots[span + 1 - j] for j in range(degree + 1)]
@@ -64,11 +72,13 @@ def _local_knots(knots, degree, span, u):
     return left, right
 
 
-@functools.partial(jax.jit, static_argnums=1)
 def basis_funs(
     knots: ArrayLike, degree: int, u: ArrayLike
 ) -> tuple[Int[Array, "..."], Float[Array, "... p+1"]]:
     """The `degree + 1` non-zero B-spline basis functions at `u` (NURBS Book A2.2).
+
+    Concrete inputs are checked as in `find_span`; traced ones are not, and a traced
+    parameter outside the domain gets the polynomial piece of the first or last span.
 
     **Arguments:**
 
@@ -82,16 +92,22 @@ def basis_funs(
     `N_{span - p + r, p}(u)`, shape `u.shape + (p + 1,)`.
     """
     check_degree(degree, minimum=0)
+    check_basis_arguments(knots, degree, u)
+    return _basis_funs(knots, degree, u)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _basis_funs(knots, degree, u):
     knots = jnp.asarray(knots)
     u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
-    span = find_span(knots, degree, u)
+    span = _find_span(knots, degree, u)
     left, right = _local_knots(knots, degree, span, u)
     funs = [jnp.ones_like(u)]
     for j in range(1, degree + 1):
         saved = jnp.zeros_like(u)
         new = []
         for r in range(j):
-            temp = _safe_divide(funs[r], right[r + 1] + left[j - r])
+            temp = safe_divide(funs[r], right[r + 1] + left[j - r])
             new.append(saved + right[r + 1] * temp)
             saved = left[j - r] * temp
         funs = [*new, saved]
@@ -106,10 +122,37 @@ def dense_basis(span: Array, funs: Array, degree: int, n_control: int) -> Array:
     return sum(funs[:, r, None] * (column == first + r) for r in range(degree + 1))
 
 
+def local_indices(span: Array, degree: int) -> Array:
+    """Indices `span - p, ..., span` of the control points that act on a span."""
+    return span[..., None] - degree + jnp.arange(degree + 1)
+
+
+def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array:
+    """`sum_r funs[..., r] P[span - p + r]`: the `p + 1` non-zero terms of a B-spline sum.
+
+    `funs` has shape `span.shape + extra + (p + 1,)` (e.g. one row per derivative order);
+    the result has shape `span.shape + extra + points.shape[1:]`. One gathered row of points per
+    term keeps the working set at `(..., dim)` instead of `(..., p + 1, dim)`.
+    """
+    extra = (1,) * (funs.ndim - span.ndim - 1)
+    item = points.shape[1:]  # (dim,) for a curve, (nv, dim) for the rows of a surface net
+    total = 0.0
+    for r in range(degree + 1):
+        row = points[span - degree + r].reshape(span.shape + extra + item)
+        total = total + funs[..., r].reshape(funs.shape[:-1] + (1,) * len(item)) * row
+    return total
+
+
 def basis_matrix(knots: ArrayLike, degree: int, u: ArrayLike) -> Float[Array, "m n+1"]:
     """The collocation matrix `A[k, i] = N_{i,p}(u_k)` of all basis functions.
 
     Interpolation and least squares solve with it; a curve's points are `A @ P`.
+
+    Concrete inputs are checked (`ValueError`, as in `find_span`): at least `2 p + 2`
+    finite, non-decreasing knots, no value repeated more than `p + 1` times, a non-empty
+    domain, and every `u` in the domain `[knots[p], knots[n + 1]]`. Traced inputs (inside
+    `jit` or `grad`) are not checked; there a parameter outside the domain gets the
+    polynomial pieces of the first or last span (`basis_funs`).
 
     **Arguments:**
 
@@ -137,7 +180,7 @@ def _ndu_table(left, right, degree, u):
         saved = jnp.zeros_like(u)
         for r in range(j):
             ndu[j][r] = right[r + 1] + left[j - r]
-            temp = _safe_divide(ndu[r][j - 1], ndu[j][r])
+            temp = safe_divide(ndu[r][j - 1], ndu[j][r])
             ndu[r][j] = saved + right[r + 1] * temp
             saved = left[j - r] * temp
         ndu[j][j] = saved
@@ -154,53 +197,60 @@ def _derivative_row(ndu, degree, r, order):
         d = jnp.zeros_like(ndu[0][0])
         rk, pk = r - k, p - k
         if r >= k:
-            a[0] = _safe_divide(a_prev[0], ndu[pk + 1][rk])
+            a[0] = safe_divide(a_prev[0], ndu[pk + 1][rk])
             d = a[0] * ndu[rk][pk]
         j1 = 1 if rk >= -1 else -rk
         j2 = k - 1 if r - 1 <= pk else p - r
         for j in range(j1, j2 + 1):
-            a[j] = _safe_divide(a_prev[j] - a_prev[j - 1], ndu[pk + 1][rk + j])
+            a[j] = safe_divide(a_prev[j] - a_prev[j - 1], ndu[pk + 1][rk + j])
             d = d + a[j] * ndu[rk + j][pk]
         if r <= pk:
-            a[k] = _safe_divide(-a_prev[k - 1], ndu[pk + 1][r])
+            a[k] = safe_divide(-a_prev[k - 1], ndu[pk + 1][r])
             d = d + a[k] * ndu[r][pk]
         row.append(d * (math.factorial(p) // math.factorial(p - k)))
         a_prev = a
     return row
 
 
-@functools.partial(jax.jit, static_argnums=(1, 3))
 def ders_basis_funs(
-    knots: ArrayLike, degree: int, u: ArrayLike, n: int
-) -> tuple[Int[Array, "..."], Float[Array, "... n+1 p+1"]]:
-    """Non-zero basis functions and their derivatives up to order `n` (NURBS Book A2.3).
+    knots: ArrayLike, degree: int, u: ArrayLike, order: int
+) -> tuple[Int[Array, "..."], Float[Array, "... order+1 p+1"]]:
+    """Non-zero basis functions and their derivatives up to `order` (NURBS Book A2.3).
 
-    Derivatives of order above the degree are exactly zero.
+    Derivatives of order above the degree are exactly zero. Concrete inputs are checked
+    as in `find_span`; traced ones are not, and a traced parameter outside the domain
+    gets the polynomial piece of the first or last span.
 
     **Arguments:**
 
     - `knots`: non-decreasing knot vector.
     - `degree`: the degree `p`.
     - `u`: parameters, any shape.
-    - `n`: highest derivative order, `n >= 0`.
+    - `order`: highest derivative order, `>= 0`.
 
     **Returns:**
 
     `(span, ders)` with `ders[..., k, r]` the k-th derivative of `N_{span - p + r, p}` at
-    `u`, shape `u.shape + (n + 1, p + 1)`.
+    `u`, shape `u.shape + (order + 1, p + 1)`.
     """
     check_degree(degree, minimum=0)
-    n = check_order(n)
+    order = check_order(order)
+    check_basis_arguments(knots, degree, u)
+    return _ders_basis_funs(knots, degree, u, order)
+
+
+@functools.partial(jax.jit, static_argnums=(1, 3))
+def _ders_basis_funs(knots, degree, u, order):
     knots = jnp.asarray(knots)
     u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
-    span = find_span(knots, degree, u)
+    span = _find_span(knots, degree, u)
     left, right = _local_knots(knots, degree, span, u)
     ndu = _ndu_table(left, right, degree, u)
-    top = min(n, degree)
+    top = min(order, degree)
     columns = []
     for r in range(degree + 1):
         column = [ndu[r][degree], *_derivative_row(ndu, degree, r, top)]
-        column += [jnp.zeros_like(u)] * (n - top)
+        column += [jnp.zeros_like(u)] * (order - top)
         columns.append(jnp.stack(column, axis=-1))
     return span, jnp.stack(columns, axis=-1)
 
@@ -237,8 +287,8 @@ def cox_de_boor(knots: ArrayLike, degree: int, i: int, u: ArrayLike) -> Float[Ar
         last_nonempty = (knots[i] < knots[i + 1]) & jnp.all(knots[i + 1 :] == knots[i + 1])
         at_end = last_nonempty & (u == knots[i + 1])
         return jnp.where(inside | at_end, 1.0, 0.0).astype(u.dtype)
-    rising = _safe_divide(u - knots[i], knots[i + degree] - knots[i])
-    falling = _safe_divide(knots[i + degree + 1] - u, knots[i + degree + 1] - knots[i + 1])
+    rising = safe_divide(u - knots[i], knots[i + degree] - knots[i])
+    falling = safe_divide(knots[i + degree + 1] - u, knots[i + degree + 1] - knots[i + 1])
     return rising * cox_de_boor(knots, degree - 1, i, u) + falling * cox_de_boor(
         knots, degree - 1, i + 1, u
     )

@@ -40,17 +40,17 @@ def de_casteljau(
 
     **Arguments:**
 
-    - `control_points`: array of shape `(n + 1, dim)`.
+    - `control_points`: array of shape `(n_control, dim)`.
     - `t`: parameters, any shape; [0, 1] is the curve, values outside extend the same
       polynomial (used to draw a conic beyond its arc), unlike `NURBSCurve`, which raises.
-    - `weights`: optional positive weights, shape `(n + 1,)`; the curve is then rational
+    - `weights`: optional positive weights, shape `(n_control,)`; the curve is then rational
       and the algorithm runs on homogeneous points.
 
     **Returns:**
 
     Array of shape `t.shape + (dim,)`.
     """
-    net, rational = _homogeneous_net(control_points, weights, 2, "(n + 1, dim)")
+    net, rational = _homogeneous_net(control_points, weights, 2, "(n_control, dim)")
     points = _casteljau(net, jnp.asarray(t, dtype=net.dtype))
     return from_homogeneous(points) if rational else points
 
@@ -64,15 +64,15 @@ def de_casteljau_surface(
 
     **Arguments:**
 
-    - `control_points`: array of shape `(n + 1, m + 1, dim)`, first axis along `u`.
+    - `control_points`: array of shape `(nu, nv, dim)`, first axis along `u`.
     - `u`, `v`: parameters in [0, 1], broadcast against each other.
-    - `weights`: optional positive weights of shape `(n + 1, m + 1)`.
+    - `weights`: optional positive weights of shape `(nu, nv)`.
 
     **Returns:**
 
     Array of shape `broadcast(u, v).shape + (dim,)`.
     """
-    net, rational = _homogeneous_net(control_points, weights, 3, "(n + 1, m + 1, dim)")
+    net, rational = _homogeneous_net(control_points, weights, 3, "(nu, nv, dim)")
     u, v = jnp.broadcast_arrays(jnp.asarray(u, net.dtype), jnp.asarray(v, net.dtype))
     rows = _casteljau(net, v[..., None])  # one point per row: (..., n + 1, D)
     points = _casteljau(rows, u)
@@ -93,7 +93,7 @@ def _check_unit_parameter(t, name):
     return t
 
 
-def bezier_matrix(degree: int, dtype=None) -> Float[Array, "n+1 n+1"]:
+def bezier_matrix(degree: int, dtype=None) -> Float[Array, "degree+1 degree+1"]:
     """The power-basis matrix `M_B` of the Bezier curves of a degree (seed 002).
 
     Convention (the seed's): powers in DECREASING order in a row vector on the left,
@@ -113,7 +113,7 @@ def bezier_matrix(degree: int, dtype=None) -> Float[Array, "n+1 n+1"]:
 
     **Returns:**
 
-    Array of shape `(n + 1, n + 1)`; its entries are integers.
+    Array of shape `(degree + 1, degree + 1)`; its entries are integers.
     """
     n = check_degree(degree, minimum=0)
     matrix = np.zeros((n + 1, n + 1))
@@ -135,17 +135,17 @@ def subdivide(control_points: ArrayLike, t: ArrayLike, weights: ArrayLike | None
 
     **Arguments:**
 
-    - `control_points`: array of shape `(n + 1, dim)`.
+    - `control_points`: array of shape `(n_control, dim)`.
     - `t`: split parameter(s) in [0, 1], any shape.
-    - `weights`: optional positive weights of shape `(n + 1,)`.
+    - `weights`: optional positive weights of shape `(n_control,)`.
 
     **Returns:**
 
-    Without weights, `(left, right)`: two arrays of shape `t.shape + (n + 1, dim)`.
+    Without weights, `(left, right)`: two arrays of shape `t.shape + (n_control, dim)`.
     With weights, `((left, left_weights), (right, right_weights))`, the weights of shape
-    `t.shape + (n + 1,)`.
+    `t.shape + (n_control,)`.
     """
-    net, rational = _homogeneous_net(control_points, weights, 2, "(n + 1, dim)")
+    net, rational = _homogeneous_net(control_points, weights, 2, "(n_control, dim)")
     t = jnp.asarray(t, dtype=net.dtype)
     _check_unit_parameter(t, "t")
     tt = t[..., None, None]
@@ -175,22 +175,21 @@ def bezier_derivative_points(control_points: ArrayLike, order: int = 1) -> Float
 
     **Arguments:**
 
-    - `control_points`: array of shape `(n + 1, dim)`.
+    - `control_points`: array of shape `(n_control, dim)`.
     - `order`: the derivative order `1 <= k <= n`.
 
     **Returns:**
 
-    Array of shape `(n + 1 - k, dim)`.
+    Array of shape `(n_control - k, dim)`.
     """
     points = jnp.asarray(control_points)
     points = points.astype(jnp.result_type(points.dtype, float))
-    check_rank(points, 2, "control_points", "(n + 1, dim)")
+    check_rank(points, 2, "control_points", "(n_control, dim)")
     order = check_degree(order, minimum=1, name="order")
     n = points.shape[0] - 1
     if order > n:
         raise ValueError(
-            f"derivative order must be <= the degree n = {n} (n + 1 = {n + 1} control "
-            f"points), got {order}"
+            f"derivative order must be <= the degree n = {n} ({n + 1} control points), got {order}"
         )
     for k in range(order):
         points = (n - k) * (points[1:] - points[:-1])
@@ -211,16 +210,16 @@ def de_casteljau_volume(
 
     **Arguments:**
 
-    - `control_points`: array of shape `(l + 1, m + 1, n + 1, dim)`; axes 0, 1, 2 run
+    - `control_points`: array of shape `(nu, nv, nw, dim)`; axes 0, 1, 2 run
       along `u`, `v`, `w`.
     - `u`, `v`, `w`: parameters in [0, 1], broadcast against each other.
-    - `weights`: optional positive weights of shape `(l + 1, m + 1, n + 1)`.
+    - `weights`: optional positive weights of shape `(nu, nv, nw)`.
 
     **Returns:**
 
     Array of shape `broadcast(u, v, w).shape + (dim,)`.
     """
-    net, rational = _homogeneous_net(control_points, weights, 4, "(l + 1, m + 1, n + 1, dim)")
+    net, rational = _homogeneous_net(control_points, weights, 4, "(nu, nv, nw, dim)")
     u, v, w = jnp.broadcast_arrays(*(jnp.asarray(x, net.dtype) for x in (u, v, w)))
     for x, name in ((u, "u"), (v, "v"), (w, "w")):
         _check_unit_parameter(x, name)

@@ -12,15 +12,18 @@ ruled surfaces count once too often,
 - `B = (1 - u)(1 - v) P00 + u (1 - v) P10 + (1 - u) v P01 + u v P11`.
 """
 
+import typing
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._curve import NURBSCurve, clamp_to_domain, safe_norm
+from ._curve import NURBSCurve
 from ._knotops import greville, merged_knots, missing_knots
-from ._surface import NURBSSurface
-from ._validate import check_grid_axes, check_parameter, check_rank, concrete, float_dtype
+from ._misc import clamp_to_domain, safe_norm
+from ._surface import AbstractSurface, NURBSSurface, autodiff_partials
+from ._validate import check_rank, concrete, float_dtype
 
 
 def bilinear_patch(p00: ArrayLike, p10: ArrayLike, p01: ArrayLike, p11: ArrayLike) -> NURBSSurface:
@@ -89,7 +92,8 @@ def _corners(curves, tol):
     return jnp.stack(gaps), corners, tol * size
 
 
-class CoonsPatch(eqx.Module):
+@typing.final
+class CoonsPatch(AbstractSurface):
     """The bilinearly blended Coons patch of four boundary curves (seed 002).
 
     `S(u, 0) = c0(u)`, `S(u, 1) = c1(u)`, `S(0, v) = d0(v)`, `S(1, v) = d1(v)` on
@@ -124,6 +128,8 @@ class CoonsPatch(eqx.Module):
         Concrete curves whose ends miss a corner raise `ValueError`; under tracing the
         check goes through `eqx.error_if`.
         """
+        if not np.isscalar(tol) or not tol >= 0:
+            raise ValueError(f"tol must be a number >= 0, got {tol!r}")
         curves = {"c0": c0, "c1": c1, "d0": d0, "d1": d1}
         for name, curve in curves.items():
             if not isinstance(curve, NURBSCurve):
@@ -148,12 +154,15 @@ class CoonsPatch(eqx.Module):
         self.c0, self.c1, self.d0, self.d1 = c0, c1, d0, d1
         self.corners = corners
 
-    def _parameters(self, u, v):
-        dtype = self.corners.dtype
-        u, v = jnp.asarray(u, dtype), jnp.asarray(v, dtype)
-        check_parameter(u, 0.0, 1.0, "u")
-        check_parameter(v, 0.0, 1.0, "v")
-        return u, v
+    @property
+    def domain(self) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
+        """`((0, 1), (0, 1))`: each boundary curve is mapped onto [0, 1]."""
+        zero, one = jnp.zeros((), self.corners.dtype), jnp.ones((), self.corners.dtype)
+        return (zero, one), (zero, one)
+
+    @property
+    def dim(self) -> int:
+        return self.corners.shape[-1]
 
     def _blend(self, cu0, cu1, dv0, dv1, u, v):
         """`L_c + L_d - B` from the boundary points; `u`, `v` with a trailing axis."""
@@ -163,10 +172,6 @@ class CoonsPatch(eqx.Module):
         corners = (1 - u) * ((1 - v) * p00 + v * p01) + u * ((1 - v) * p10 + v * p11)
         return ruled_c + ruled_d - corners
 
-    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... dim"]:
-        """Points `S(u, v)` for `u`, `v` in [0, 1], broadcast against each other."""
-        return self._points(*jnp.broadcast_arrays(*self._parameters(u, v)))
-
     # One compiled function per patch and shape, instead of one per boundary curve.
     @eqx.filter_jit
     def _points(self, u: Array, v: Array) -> Array:
@@ -174,20 +179,23 @@ class CoonsPatch(eqx.Module):
         dv0, dv1 = _unit_to_domain(self.d0, v), _unit_to_domain(self.d1, v)
         return self._blend(cu0, cu1, dv0, dv1, u[..., None], v[..., None])
 
-    def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
-        """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`.
-
-        Each boundary curve is evaluated once per grid line, not once per point.
-        """
-        us, vs = self._parameters(us, vs)
-        check_grid_axes(us, vs)
-        return self._grid(us, vs)
-
     @eqx.filter_jit
     def _grid(self, us: Array, vs: Array) -> Array:
+        # Each boundary curve is evaluated once per grid line, not once per point.
         cu0, cu1 = (_unit_to_domain(c, us)[:, None, :] for c in (self.c0, self.c1))
         dv0, dv1 = (_unit_to_domain(d, vs)[None, :, :] for d in (self.d0, self.d1))
         return self._blend(cu0, cu1, dv0, dv1, us[:, None, None], vs[None, :, None])
+
+    @eqx.filter_jit
+    def _derivatives(self, u: Array, v: Array, order: int) -> Array:
+        return autodiff_partials(self._points, u, v, order)
+
+    def _sampling(self):
+        def along(a, b):  # the knots of two opposite curves on [0, 1], as for a degree-p net
+            breaks = [_on_unit_domain(c).knots[c.degree : -c.degree] for c in (a, b)]
+            return jnp.sort(jnp.concatenate(breaks)), max(a.degree, b.degree) + 2
+
+        return along(self.c0, self.c1), along(self.d0, self.d1)
 
     def to_nurbs(self) -> NURBSSurface:
         """The patch as an exact B-spline surface (non-rational boundary curves, concrete knots).
@@ -233,24 +241,3 @@ def _compatible(a: NURBSCurve, b: NURBSCurve) -> tuple[NURBSCurve, NURBSCurve]:
     a, b = (c if c.degree == degree else c.elevate_degree(degree - c.degree) for c in (a, b))
     target = merged_knots(np.asarray(a.knots), np.asarray(b.knots))
     return tuple(c.refine(missing_knots(np.asarray(c.knots), target)) for c in (a, b))
-
-
-def coons(
-    c0: NURBSCurve, c1: NURBSCurve, d0: NURBSCurve, d1: NURBSCurve, tol: float = 1e-9
-) -> CoonsPatch:
-    """The bilinearly blended Coons patch with `S(u, 0) = c0`, `S(u, 1) = c1`,
-    `S(0, v) = d0`, `S(1, v) = d1` (seed 002); see `CoonsPatch`.
-
-    **Arguments:**
-
-    - `c0`, `c1`, `d0`, `d1`: `NURBSCurve`s on any domains (mapped linearly to [0, 1]),
-      meeting at the four corners.
-    - `tol`: allowed corner mismatch relative to the curves' size.
-
-    **Returns:**
-
-    A `CoonsPatch`, callable as `patch(u, v)` and `patch.grid(us, vs)`.
-    """
-    if not np.isscalar(tol) or not tol >= 0:
-        raise ValueError(f"tol must be a number >= 0, got {tol!r}")
-    return CoonsPatch(c0, c1, d0, d1, tol)

@@ -20,25 +20,44 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._bezier import bezier_matrix
 from ._curve import NURBSCurve
-from ._patches import basis_or_matrix, cubic_basis_matrix
 from ._validate import check_parameter, check_rank, concrete, float_dtype
 
-HERMITE_MATRIX = np.array(
-    [[2.0, -2.0, 1.0, 1.0], [-3.0, 3.0, -2.0, -1.0], [0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]]
-)
-"""The cubic Hermite basis matrix for the geometry `(p0, p1, m0, m1)` (rows: t^3, t^2, t, 1)."""
-
-_KINDS = ["bezier", "bspline", "catmull-rom", "hermite"]
+# NumPy float64 constants (JAX arrays made at import time would be frozen at the dtype of
+# that moment), converted when used. Rows: the coefficients of t^3, t^2, t, 1.
+_MATRICES = {
+    "bspline": np.array(
+        [[-1.0, 3.0, -3.0, 1.0], [3.0, -6.0, 3.0, 0.0], [-3.0, 0.0, 3.0, 0.0], [1.0, 4.0, 1.0, 0.0]]
+    )
+    / 6.0,
+    "catmull-rom": np.array(
+        [
+            [-1.0, 3.0, -3.0, 1.0],
+            [2.0, -5.0, 4.0, -1.0],
+            [-1.0, 0.0, 1.0, 0.0],
+            [0.0, 2.0, 0.0, 0.0],
+        ]
+    )
+    / 2.0,
+    "hermite": np.array(
+        [[2.0, -2.0, 1.0, 1.0], [-3.0, 3.0, -2.0, -1.0], [0.0, 0.0, 1.0, 0.0], [1.0, 0.0, 0.0, 0.0]]
+    ),
+}
+_KINDS = ("bezier", "bspline", "catmull-rom", "hermite")
 
 
 def cubic_matrix(kind: str, dtype=None) -> Float[Array, "4 4"]:
-    """The basis matrix of a cubic segment in matrix form.
+    """The basis matrix `M` of a cubic segment in matrix form, `C(t) = [t^3, t^2, t, 1] M G`
+    (seed 002).
 
     **Arguments:**
 
-    - `kind`: `"bezier"`, `"bspline"`, `"catmull-rom"` (as `cubic_basis_matrix`) or
-      `"hermite"` (geometry `(p0, p1, m0, m1)`).
+    - `kind`: `"bezier"` (`bezier_matrix(3)`; geometry: the four control points),
+      `"bspline"` (one segment of the uniform cubic B-spline,
+      `(1/6) [[-1,3,-3,1],[3,-6,3,0],[-3,0,3,0],[1,4,1,0]]`), `"catmull-rom"`
+      (`(1/2) [[-1,3,-3,1],[2,-5,4,-1],[-1,0,1,0],[0,2,0,0]]`, the segment between the
+      middle two points) or `"hermite"` (geometry `(p0, p1, m0, m1)`).
     - `dtype`: floating dtype of the result (default: JAX's default float).
 
     **Returns:**
@@ -46,10 +65,21 @@ def cubic_matrix(kind: str, dtype=None) -> Float[Array, "4 4"]:
     Array of shape `(4, 4)`, rows the coefficients of `t^3, t^2, t, 1`.
     """
     if not isinstance(kind, str) or kind.lower() not in _KINDS:
-        raise ValueError(f"basis must be one of {_KINDS}, got {kind!r}")
-    if kind.lower() == "hermite":
-        return jnp.asarray(HERMITE_MATRIX, dtype=dtype or jnp.result_type(float))
-    return cubic_basis_matrix(kind, dtype)
+        raise ValueError(f"kind must be one of {_KINDS}, got {kind!r}")
+    dtype = dtype or jnp.result_type(float)
+    if kind.lower() == "bezier":
+        return bezier_matrix(3, dtype)
+    return jnp.asarray(_MATRICES[kind.lower()], dtype=dtype)
+
+
+def basis_or_matrix(basis, dtype) -> Float[Array, "4 4"]:
+    """`cubic_matrix(basis, dtype)` when `basis` is a name, else `basis` as a `(4, 4)` array."""
+    if isinstance(basis, str):
+        return cubic_matrix(basis, dtype)
+    matrix = jnp.asarray(basis, dtype=dtype)
+    if matrix.shape != (4, 4):
+        raise ValueError(f"a basis matrix must have shape (4, 4), got {matrix.shape}")
+    return matrix
 
 
 def matrix_segment(
@@ -73,7 +103,7 @@ def matrix_segment(
     check_rank(geometry, 2, "geometry", "(4, dim)")
     if geometry.shape[0] != 4:
         raise ValueError(f"geometry must have shape (4, dim), got {geometry.shape}")
-    matrix = basis_or_matrix(basis, geometry.dtype, named=cubic_matrix)
+    matrix = basis_or_matrix(basis, geometry.dtype)
     t = jnp.asarray(t, dtype=geometry.dtype)
     check_parameter(t, 0.0, 1.0, "t")
     powers = jnp.stack([t**3, t**2, t, jnp.ones_like(t)], axis=-1)
@@ -103,7 +133,7 @@ def _piecewise_bezier(starts, inner1, inner2, last, dtype) -> NURBSCurve:
 def hermite_segment(p0: ArrayLike, p1: ArrayLike, m0: ArrayLike, m1: ArrayLike) -> NURBSCurve:
     """The cubic Hermite segment from `p0` to `p1` with derivatives `m0`, `m1` at the ends.
 
-    The curve is `[t^3, t^2, t, 1] @ HERMITE_MATRIX @ (p0, p1, m0, m1)` on [0, 1], built as
+    The curve is `[t^3, t^2, t, 1] @ cubic_matrix("hermite") @ (p0, p1, m0, m1)` on [0, 1], built as
     the equivalent cubic Bezier curve `(p0, p0 + m0 / 3, p1 - m1 / 3, p1)` (a Bezier
     curve's end derivative is `3 (P1 - P0)`).
 
@@ -191,7 +221,7 @@ def catmull_rom(points: ArrayLike, closed: bool = False) -> NURBSCurve:
 def uniform_cubic_bspline(points: ArrayLike, closed: bool = False) -> NURBSCurve:
     """The uniform cubic B-spline with control points `points` (seed 002's matrix form).
 
-    Segment `k` is `[t^3, t^2, t, 1] @ BSPLINE_MATRIX @ P[k : k + 4]`, `t = u - k`. The
+    Segment `k` is `[t^3, t^2, t, 1] @ cubic_matrix("bspline") @ P[k : k + 4]`, `t = u - k`. The
     curve is C2 and interpolates none of its points in general. A closed curve wraps the
     points (`P[n + j] = P[j]`), giving `n` segments and a C2 loop.
 

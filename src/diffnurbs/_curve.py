@@ -6,18 +6,11 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._basis import basis_funs, ders_basis_funs, find_span
+from ._basis import basis_funs, combine_local, ders_basis_funs, find_span
 from ._inversion import curve_closest_point
-from ._knotops import (
-    bezier_knots,
-    bezier_segments,
-    check_insertion,
-    check_refinement,
-    elevate,
-    insert,
-    span_breaks,
-)
+from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
 from ._knots import clamped_knots
+from ._misc import clamp_to_domain, safe_divide, safe_norm, safe_normalize, safe_sqrt
 from ._quadrature import integrate_panels
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_curve_derivatives
 from ._validate import (
@@ -32,51 +25,6 @@ from ._validate import (
     concrete,
     float_dtype,
 )
-
-
-def safe_sqrt(x: Array) -> Array:
-    """Square root with a zero (not infinite) gradient at zero; negatives map to zero."""
-    positive = x > 0
-    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
-
-
-def safe_norm(x: Array, axis: int = -1) -> Array:
-    """Euclidean norm whose gradient is zero, not NaN, at the zero vector."""
-    return safe_sqrt(jnp.sum(x * x, axis=axis))
-
-
-def safe_normalize(x: Array) -> Array:
-    """`x / |x|` along the last axis; the zero vector maps to zero."""
-    norm = safe_norm(x)[..., None]
-    return jnp.where(norm > 0, x / jnp.where(norm > 0, norm, 1.0), 0.0)
-
-
-def clamp_to_domain(u: Array, lower: Array, upper: Array) -> Array:
-    # `where` rather than `clip`: at u == lower the gradient must pass through whole
-    # (jnp.clip would split it between u and the bound).
-    return jnp.where(u < lower, lower, jnp.where(u > upper, upper, u))
-
-
-def local_indices(span: Array, degree: int) -> Array:
-    """Indices `span - p, ..., span` of the control points that act on a span."""
-    return span[..., None] - degree + jnp.arange(degree + 1)
-
-
-def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array:
-    """`sum_r funs[..., r] P[span - p + r]`: the `p + 1` non-zero terms of a B-spline sum.
-
-    `funs` has shape `span.shape + extra + (p + 1,)` (e.g. one row per derivative order);
-    the result has shape `span.shape + extra + points.shape[1:]`. One gathered row of points per
-    term keeps the working set at `(..., dim)` instead of `(..., p + 1, dim)`.
-    """
-    extra = (1,) * (funs.ndim - span.ndim - 1)
-    item = points.shape[1:]  # (dim,) for a curve, (nv, dim) for the rows of a surface net
-    total = 0.0
-    for r in range(degree + 1):
-        row = points[span - degree + r].reshape(span.shape + extra + item)
-        total = total + funs[..., r].reshape(funs.shape[:-1] + (1,) * len(item)) * row
-    return total
-
 
 # Evaluate points from per-span Taylor coefficients once there are this many parameters per
 # span: building the table costs about as much as evaluating this many points directly.
@@ -94,9 +42,9 @@ class NURBSCurve(AbstractRationalSpline):
     they are clamped to the nearest end of the domain.
     """
 
-    control_points: Float[Array, "n dim"]
-    weights: Float[Array, " n"] | None
-    knots: Float[Array, " n+p+1"]
+    control_points: Float[Array, "n_control dim"]
+    weights: Float[Array, " n_control"] | None
+    knots: Float[Array, " n_control+p+1"]
     degree: int = eqx.field(static=True)
 
     def __init__(
@@ -108,10 +56,11 @@ class NURBSCurve(AbstractRationalSpline):
     ):
         """**Arguments:**
 
-        - `control_points`: array of shape `(n + 1, dim)`.
-        - `degree`: the degree `p`, `1 <= p <= n`.
-        - `knots`: `n + p + 2` non-decreasing knots; None gives clamped uniform knots on [0, 1].
-        - `weights`: `n + 1` positive weights; None gives a non-rational curve.
+        - `control_points`: array of shape `(n_control, dim)`.
+        - `degree`: the degree `p`, `1 <= p < n_control`.
+        - `knots`: `n_control + p + 1` non-decreasing knots; None gives clamped uniform
+          knots on [0, 1].
+        - `weights`: `n_control` positive weights; None gives a non-rational curve.
         """
         self.degree = check_degree(degree)
         points = jnp.asarray(control_points)
@@ -129,7 +78,7 @@ class NURBSCurve(AbstractRationalSpline):
 
     @property
     def domain(self) -> tuple[Array, Array]:
-        """`(knots[p], knots[n + 1])`, the parameter interval."""
+        """`(knots[p], knots[n_control])`, the parameter interval."""
         return self.knots[self.degree], self.knots[-self.degree - 1]
 
     def _from_homogeneous_points(
@@ -142,26 +91,26 @@ class NURBSCurve(AbstractRationalSpline):
         return NURBSCurve(from_homogeneous(points), degree, knots, points[:, -1])
 
     def insert_knot(self, u: ArrayLike, times: int = 1) -> "NURBSCurve":
-        """The same curve with the knot `u` inserted `times` times (Boehm, NURBS Book A5.1).
+        """The same curve with the knot `u` inserted `times` times (the control points of
+        Boehm's NURBS Book A5.1, computed at once; see `_knotops.insert`).
 
         The knot may end with multiplicity at most the degree. Works with a traced `u`
         (checks then skipped), so it can sit inside a loss function.
         """
-        times = check_insertion(self.knots, self.degree, u, times)
-        u = jnp.asarray(u, dtype=self.knots.dtype)
-        points, knots = insert(self.homogeneous_points(), self.knots, self.degree, [u] * times)
+        homogeneous = self.homogeneous_points()
+        points, knots = checked_insertion(homogeneous, self.knots, self.degree, u, times)
         return self._from_homogeneous_points(points, knots)
 
     def refine(self, values: ArrayLike) -> "NURBSCurve":
         """The same curve with every knot of `values` inserted (knot refinement, one
         vectorised pass; see `_knotops.insert`). Values may be traced (checks then skipped)."""
-        values = jnp.ravel(jnp.asarray(values, dtype=self.knots.dtype))
-        check_refinement(self.knots, self.degree, values)
-        points, knots = insert(self.homogeneous_points(), self.knots, self.degree, values)
+        homogeneous = self.homogeneous_points()
+        points, knots = checked_refinement(homogeneous, self.knots, self.degree, values)
         return self._from_homogeneous_points(points, knots)
 
     def elevate_degree(self, times: int = 1) -> "NURBSCurve":
-        """The same curve with its degree raised by `times` (every knot `times` more often).
+        """The same curve with its degree raised by `times`: every knot of the domain
+        `times` more often, unclamped knots clamped first.
 
         Exact up to rounding; needs concrete knots (see `_knotops.elevate`).
         """
@@ -171,12 +120,8 @@ class NURBSCurve(AbstractRationalSpline):
 
     def decompose(self) -> list["NURBSCurve"]:
         """The Bezier pieces of the curve, one per non-empty knot span (clamped, concrete knots)."""
-        pieces = bezier_segments(self.homogeneous_points(), self.knots, self.degree)
-        breaks = span_breaks(self.knots, self.degree)
-        return [
-            self._from_homogeneous_points(piece, bezier_knots(a, b, self.degree, self.knots.dtype))
-            for piece, a, b in zip(pieces, breaks[:-1], breaks[1:], strict=True)
-        ]
+        pieces = bezier_pieces(self.homogeneous_points(), self.knots, self.degree)
+        return [self._from_homogeneous_points(piece, knots) for piece, knots in pieces]
 
     def _parameters(self, u: ArrayLike) -> Array:
         """Parameters as an array; concrete ones outside the domain raise `ValueError`."""
@@ -274,7 +219,7 @@ class NURBSCurve(AbstractRationalSpline):
             gram = jnp.sum(d1 * d1, -1) * jnp.sum(d2 * d2, -1) - jnp.sum(d1 * d2, -1) ** 2
             bend = safe_sqrt(gram)
         speed3 = safe_norm(d1) ** 3
-        return jnp.where(speed3 > 0, bend / jnp.where(speed3 > 0, speed3, 1.0), 0.0)
+        return safe_divide(bend, speed3)
 
     def arc_length(self, a: ArrayLike | None = None, b: ArrayLike | None = None) -> Array:
         """Length of the curve between parameters `a` and `b` (default: the whole domain).

@@ -17,7 +17,7 @@ from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import bernstein
-from ._validate import check_degree, check_finite, concrete, float_dtype
+from ._validate import check_control_count, check_degree, check_finite, concrete, float_dtype
 
 
 def _box(box_min, box_max, dim=None):
@@ -49,42 +49,41 @@ def _lattice(lattice):
     dim = lattice.ndim - 1
     if dim not in (2, 3) or lattice.shape[-1] != dim:
         raise ValueError(
-            "lattice must have shape (l + 1, m + 1, 2) in 2D or (l + 1, m + 1, n + 1, 3) in "
+            "lattice must have shape (nu, nv, 2) in 2D or (nu, nv, nw, 3) in "
             f"3D, got {lattice.shape}"
         )
-    if min(lattice.shape[:-1]) < 2:
-        raise ValueError(
-            f"lattice needs at least 2 points along each axis (degree >= 1), got {lattice.shape}"
-        )
+    for axis, count in enumerate(lattice.shape[:-1]):
+        # A Bezier lattice's degree along an axis is its count there less one, at least 1.
+        check_control_count(count, 1, f"lattice points along axis {axis}")
     return check_finite(lattice, "lattice")
 
 
 def ffd_lattice(
-    box_min: ArrayLike, box_max: ArrayLike, degrees: tuple[int, ...]
+    box_min: ArrayLike, box_max: ArrayLike, degree: tuple[int, ...]
 ) -> Float[Array, "... dim"]:
     """The undeformed regular Bezier lattice of a box: `ffd` with it is the identity.
 
     **Arguments:**
 
     - `box_min`, `box_max`: opposite corners of the box, shape `(dim,)`, `dim` 2 or 3.
-    - `degrees`: the Bezier degree along each axis, `dim` ints >= 1 (`(2, 2)` is the
+    - `degree`: the Bezier degree along each axis, `dim` ints >= 1 (`(2, 2)` is the
       seed's biquadratic 3 x 3 grid).
 
     **Returns:**
 
-    Array of shape `(l + 1, m + 1, dim)` or `(l + 1, m + 1, n + 1, dim)`:
+    Array of shape `(nu, nv, dim)` or `(nu, nv, nw, dim)` (degree plus one points per axis):
     `P[i, j, k] = box_min + (i / l, j / m, k / n) * (box_max - box_min)`.
     """
     low, high = _box(box_min, box_max)
-    if not isinstance(degrees, (tuple, list)) or len(degrees) != low.shape[0]:
+    if not isinstance(degree, (tuple, list)) or len(degree) != low.shape[0]:
         raise ValueError(
-            f"degrees must be a tuple of {low.shape[0]} ints (one per axis of the box), "
-            f"got {degrees!r}"
+            f"degree must be a tuple of {low.shape[0]} ints (one per axis of the box), "
+            f"got {degree!r}"
         )
     if low.shape[0] not in (2, 3):
         raise ValueError(f"the box must be 2D or 3D, got dimension {low.shape[0]}")
-    degrees = [check_degree(d, name=f"degrees[{i}]") for i, d in enumerate(degrees)]
-    steps = [np.arange(d + 1) / d for d in degrees]
+    degree = [check_degree(d, name=f"degree[{i}]") for i, d in enumerate(degree)]
+    steps = [np.arange(d + 1) / d for d in degree]
     unit = np.stack(np.meshgrid(*steps, indexing="ij"), axis=-1)
     return low + jnp.asarray(unit, low.dtype) * (high - low)
 
@@ -116,8 +115,8 @@ def ffd(
     **Arguments:**
 
     - `points`: array of shape `(..., dim)`, `dim` 2 or 3.
-    - `lattice`: control points, shape `(l + 1, m + 1, 2)` in 2D or
-      `(l + 1, m + 1, n + 1, 3)` in 3D; `ffd_lattice` gives the undeformed one.
+    - `lattice`: control points, shape `(nu, nv, 2)` in 2D or
+      `(nu, nv, nw, 3)` in 3D; `ffd_lattice` gives the undeformed one.
     - `box_min`, `box_max`: the box the lattice spans, shape `(dim,)`, `box_min < box_max`.
 
     **Returns:**
@@ -160,7 +159,7 @@ def deform_image(
 
     - `image`: array of shape `(H, W)` or `(H, W, C)`, `H, W >= 2`; integer images are
       converted to floats.
-    - `lattice`: 2D Bezier lattice of shape `(l + 1, m + 1, 2)` over the unit square.
+    - `lattice`: 2D Bezier lattice of shape `(nu, nv, 2)` over the unit square.
     - `iterations`: Newton steps, a Python int >= 1.
     - `fill`: value of pixels without a source.
 
@@ -175,7 +174,7 @@ def deform_image(
         )
     lattice = _lattice(lattice)
     if lattice.shape[-1] != 2:
-        raise ValueError(f"deform_image needs a 2D lattice (l + 1, m + 1, 2), got {lattice.shape}")
+        raise ValueError(f"deform_image needs a 2D lattice (nu, nv, 2), got {lattice.shape}")
     iterations = check_degree(iterations, name="iterations")
     dtype = float_dtype(image, lattice)
     image, lattice = image.astype(dtype), lattice.astype(dtype)

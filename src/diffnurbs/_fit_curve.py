@@ -25,8 +25,9 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
-from ._curve import NURBSCurve, clamp_to_domain, safe_norm
+from ._curve import NURBSCurve
 from ._interpolate import _data_points, _parameters, approximate
+from ._misc import clamp_to_domain, safe_norm
 from ._validate import check_control_count, check_degree, check_knots, concrete
 
 _POLISH_STEPS = 4  # Gauss-Newton steps after Levenberg-Marquardt (see `_solve`)
@@ -65,15 +66,15 @@ def _check_options(rational, correct_parameters, max_steps, tol):
 
 def fit_curve(
     points: ArrayLike,
-    degree: int = 3,
     n_control: int | None = None,
+    degree: int = 3,
+    *,
     rational: bool = False,
     parametrization="centripetal",
     correct_parameters: bool = False,
     max_steps: int = 256,
     tol: float | None = None,
     full_output: bool = False,
-    *,
     knots: ArrayLike | None = None,
 ):
     """Fit a B-spline or NURBS curve to points by Levenberg-Marquardt (optimistix).
@@ -99,9 +100,9 @@ def fit_curve(
     **Arguments:**
 
     - `points`: array of shape `(m, dim)`, `m >= n_control`.
-    - `degree`: the degree `p >= 1`.
     - `n_control`: number of control points, `p + 1 <= n_control <= m`; None gives
       `p + 1` (one Bezier segment).
+    - `degree`: the degree `p >= 1`.
     - `rational`: also fit the weights.
     - `parametrization`: `"uniform"`, `"chord"`, `"centripetal"` (see `parametrize`) or
       `m` increasing parameters: the start, or the fixed parameters without
@@ -126,12 +127,7 @@ def fit_curve(
     degree = check_degree(degree)
     points = _data_points(points)
     n_control = degree + 1 if n_control is None else n_control
-    check_control_count(n_control, degree)
-    if points.shape[0] < n_control:
-        raise ValueError(
-            f"fitting {n_control} control points needs at least {n_control} points, "
-            f"got {points.shape[0]}"
-        )
+    check_control_count(n_control, degree, at_most=points.shape[0])
     _check_options(rational, correct_parameters, max_steps, tol)
     if knots is not None:
         knots = check_knots(jnp.asarray(knots, dtype=points.dtype), n_control, degree)

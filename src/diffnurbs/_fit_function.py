@@ -15,8 +15,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._basis import basis_funs
-from ._curve import NURBSCurve, combine_local
+from ._basis import basis_funs, combine_local
+from ._curve import NURBSCurve
 from ._interpolate import check_solved, least_squares
 from ._validate import check_degree
 
@@ -39,16 +39,16 @@ class FunctionFitReport(eqx.Module):
     - `features`: the extrema and inflection points found (interior knots to start from).
     - `kinks`: the jumps of `f'` found (knots of multiplicity `degree`).
     - `degree`, `n_control`: of the result.
-    - `iterations`: least-squares fits made, over all degrees.
+    - `steps`: least-squares fits made, over all degrees.
     """
 
     max_error: float
-    knots: Float[Array, " n+p+1"]
+    knots: Float[Array, " n_control+p+1"]
     features: Float[Array, " k"]
     kinks: Float[Array, " j"]
     degree: int = eqx.field(static=True)
     n_control: int = eqx.field(static=True)
-    iterations: int = eqx.field(static=True)
+    steps: int = eqx.field(static=True)
 
 
 def _check_inputs(f, a, b, tol, max_degree):
@@ -231,7 +231,7 @@ def fit_function(
     max_degree: int = 3,
     full_output: bool = False,
     *,
-    max_iterations: int = 100,
+    max_steps: int = 100,
 ) -> NURBSCurve | tuple[NURBSCurve, FunctionFitReport]:
     """A scalar B-spline `s` on `[a, b]` with `|s(t) - f(t)| <= tol`, with few control points
     (seed 003, §5).
@@ -253,7 +253,7 @@ def fit_function(
       float32 (JAX's default) tolerances below about `1e-6 * max|f|` fail; enable x64.
     - `max_degree`: the highest degree tried.
     - `full_output`: also return a `FunctionFitReport`.
-    - `max_iterations`: least-squares fits before giving up.
+    - `max_steps`: least-squares fits before giving up.
 
     **Returns:**
 
@@ -270,24 +270,24 @@ def fit_function(
     features, kinks = critical_points(f, a, b)
     breaks = np.concatenate([[a], _distinct(np.concatenate([features, kinks]), a, b), [b]])
     kinks = breaks[np.isin(breaks, kinks)]  # a feature merged with a kink is the kink
-    iterations = 0
+    steps = 0
     for degree in range(1, max_degree + 1):
         knots, control, span_errors = _fit(f, breaks, degree, kinks, dtype)
-        iterations += 1
+        steps += 1
         if span_errors.max() <= tol:
             break
     smallest = 64 * np.finfo(dtype).eps * max(abs(a), abs(b), b - a)
     while span_errors.max() > tol:
         worst = int(np.argmax(span_errors))
-        if iterations >= max_iterations or breaks[worst + 1] - breaks[worst] < smallest:
+        if steps >= max_steps or breaks[worst + 1] - breaks[worst] < smallest:
             raise RuntimeError(
                 f"fit_function did not reach tol = {tol:g}: the error is "
-                f"{span_errors.max():.3g} near t = {breaks[worst]:.17g} after {iterations} "
+                f"{span_errors.max():.3g} near t = {breaks[worst]:.17g} after {steps} "
                 "fits (is f discontinuous there, or the tolerance below float rounding?)"
             )
         breaks = _bisected(breaks, span_errors, tol)
         knots, control, span_errors = _fit(f, breaks, degree, kinks, dtype)
-        iterations += 1
+        steps += 1
     curve = NURBSCurve(control, degree, knots)
     if not full_output:
         return curve
@@ -298,6 +298,6 @@ def fit_function(
         kinks=jnp.asarray(kinks, dtype=dtype),
         degree=degree,
         n_control=int(control.shape[0]),
-        iterations=iterations,
+        steps=steps,
     )
     return curve, report

@@ -10,13 +10,17 @@ curvature vanishes and flips across inflections; the rotation-minimising frame (
 continuous and does not twist about the tangent, so swept tubes do not corkscrew.
 """
 
+import typing
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._curve import NURBSCurve, safe_norm, safe_normalize
-from ._validate import check_grid_axes
+from ._curve import NURBSCurve
+from ._misc import safe_norm, safe_normalize
+from ._surface import AbstractSurface, autodiff_partials
+from ._validate import check_parameter
 
 FRAME_KINDS = ("rmf", "frenet")
 
@@ -99,7 +103,7 @@ def double_reflection(x0: Array, t0: Array, r0: Array, x1: Array, t1: Array) -> 
 
 
 def _frenet(path: NURBSCurve, v: Array) -> Array:
-    ders = path._derivatives(v, 2)
+    ders = path.derivatives(v, 2)
     d1, d2 = ders[..., 1, :], ders[..., 2, :]
     t = safe_normalize(d1)
     bend = jnp.cross(d1, d2)
@@ -129,7 +133,7 @@ def rmf_table(path: NURBSCurve) -> tuple[Array, Array, Array, Array]:
     fractions = jnp.arange(_RMF_STEPS_PER_SPAN, dtype=dtype) / _RMF_STEPS_PER_SPAN
     inner = breaks[:-1, None] + (breaks[1:] - breaks[:-1])[:, None] * fractions
     params = jnp.concatenate([inner.ravel(), breaks[-1:]])
-    ders = path._derivatives(params, 1)
+    ders = path.derivatives(params, 1)
     points, tangents = ders[:, 0, :], safe_normalize(ders[:, 1, :])
     start = any_normal(tangents[0])
 
@@ -147,21 +151,21 @@ def rmf_table(path: NURBSCurve) -> tuple[Array, Array, Array, Array]:
 def _rmf(path: NURBSCurve, v: Array) -> Array:
     params, points, tangents, normals = rmf_table(path)
     below = jnp.clip(jnp.searchsorted(params, v, side="right") - 1, 0, params.shape[0] - 1)
-    ders = path._derivatives(v, 1)
+    ders = path.derivatives(v, 1)
     x, t = ders[..., 0, :], safe_normalize(ders[..., 1, :])
     r = double_reflection(points[below], tangents[below], normals[below], x, t)
     return _stack_frame(t, r)
 
 
-def frames(path: NURBSCurve, v: ArrayLike, kind: str = "rmf") -> Float[Array, "... 3 3"]:
+def frames(path: NURBSCurve, v: ArrayLike, frame: str = "rmf") -> Float[Array, "... 3 3"]:
     """Moving frames along a space curve: rows `T, N, B`, right-handed.
 
-    - `kind="frenet"`: `T = C'/|C'|`, `B = C' x C'' / |C' x C''|`, `N = B x T`. Where
+    - `frame="frenet"`: `T = C'/|C'|`, `B = C' x C'' / |C' x C''|`, `N = B x T`. Where
       `C' x C''` vanishes (straight pieces, inflections: the Frenet frame is undefined
       there) the fallback is `N = any_normal(T)`, the axis least aligned with `T` made
       normal to it, so the result is NaN-free but may jump. The Frenet normal points to
       the centre of curvature, so it reverses across an inflection.
-    - `kind="rmf"`: the rotation-minimising frame, `N' . B = 0` (no twist about `T`),
+    - `frame="rmf"`: the rotation-minimising frame, `N' . B = 0` (no twist about `T`),
       started from `N(v_min) = any_normal(T(v_min))` and carried by the double-reflection
       method over a fixed table of 64 steps per knot span; each requested `v` takes one
       more double reflection from the table sample just below it, so any `v` array (in any
@@ -173,7 +177,7 @@ def frames(path: NURBSCurve, v: ArrayLike, kind: str = "rmf") -> Float[Array, ".
 
     - `path`: a `NURBSCurve` in 3D.
     - `v`: parameters in the path's domain, any shape.
-    - `kind`: `"rmf"` (default) or `"frenet"`.
+    - `frame`: `"rmf"` (default) or `"frenet"`.
 
     **Returns:**
 
@@ -181,14 +185,16 @@ def frames(path: NURBSCurve, v: ArrayLike, kind: str = "rmf") -> Float[Array, ".
     `[..., 2, :]` is `B`.
     """
     _check_path(path)
-    _check_kind(kind)
-    v = path._parameters(v)
-    if kind == "frenet":
+    _check_kind(frame)
+    v = jnp.asarray(v, dtype=path.knots.dtype)
+    check_parameter(v, *path.domain, "v")
+    if frame == "frenet":
         return _frenet(path, v)
-    return _rmf(path, path._clamp(v))
+    return _rmf(path, v)
 
 
-class KinematicSweep(eqx.Module):
+@typing.final
+class KinematicSweep(AbstractSurface):
     """The surface traced by a profile carried rigidly by a moving frame (seed eq. 2.8).
 
     `S(u, v) = g(v) + A(v) X(u)`, where `A(v) = frames(path, v).T` and `X(u)` is the profile
@@ -234,36 +240,30 @@ class KinematicSweep(eqx.Module):
         start = frames(self.path, v_min, self.frame)
         return (points - self.path(v_min)) @ start.T  # rows of A^T (C - g): X per point
 
-    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... 3"]:
-        """Points `S(u, v)`; `u` and `v` broadcast, returns `shape + (3,)`."""
-        u, v = jnp.broadcast_arrays(jnp.asarray(u), jnp.asarray(v))
+    @property
+    def domain(self) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
+        """`(profile.domain, path.domain)`."""
+        return self.profile.domain, self.path.domain
+
+    @property
+    def dim(self) -> int:
+        return 3
+
+    def _points(self, u: Array, v: Array) -> Array:
         local = self._local(u)
         frame = frames(self.path, v, self.frame)
         return self.path(v) + jnp.einsum("...k,...kd->...d", local, frame)
 
-    def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv 3"]:
-        """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), 3)`.
-
-        The profile and the frames are evaluated once per `u` and once per `v`.
-        """
-        us, vs = jnp.asarray(us), jnp.asarray(vs)
-        check_grid_axes(us, vs)
+    def _grid(self, us: Array, vs: Array) -> Array:
+        # The profile and the frames are evaluated once per u and once per v.
         local = self._local(us)
         frame = frames(self.path, vs, self.frame)
         return self.path(vs)[None] + jnp.einsum("ik,jkd->ijd", local, frame)
 
+    @eqx.filter_jit
+    def _derivatives(self, u: Array, v: Array, order: int) -> Array:
+        return autodiff_partials(self._points, u, v, order)
 
-def kinematic_sweep(profile: NURBSCurve, path: NURBSCurve, frame: str = "rmf") -> KinematicSweep:
-    """The kinematic surface of `profile` moved along `path` (seed eq. 2.5-2.9).
-
-    **Arguments:**
-
-    - `profile`: 2D curve in the normal plane, or 3D curve placed at the path's start.
-    - `path`: 3D guide curve.
-    - `frame`: `"rmf"` (default, twist-free) or `"frenet"`.
-
-    **Returns:**
-
-    A `KinematicSweep`, callable as `S(u, v)` with `.grid(us, vs)`.
-    """
-    return KinematicSweep(profile, path, frame)
+    def _sampling(self):
+        p, q = self.profile.degree, self.path.degree
+        return (self.profile.knots[p:-p], p + 2), (self.path.knots[q:-q], q + 2)

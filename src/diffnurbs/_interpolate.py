@@ -16,8 +16,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
 
-from ._banded import band_rows, solve_banded
-from ._basis import basis_funs, basis_matrix, ders_basis_funs
+from ._banded import band_rows, collocation_solve, solve_banded
+from ._basis import basis_funs, basis_matrix
 from ._curve import NURBSCurve
 from ._knots import (
     approximation_knots,
@@ -33,8 +33,10 @@ from ._surface import NURBSSurface
 from ._validate import (
     check_control_count,
     check_degree,
+    check_degree_pair,
     check_finite,
     check_knots,
+    check_pair,
     check_rank,
     concrete,
     float_dtype,
@@ -45,13 +47,6 @@ def _data_points(points: ArrayLike, name: str = "points") -> Array:
     points = jnp.asarray(points)
     check_rank(points, 2, name, "(n_points, dim)")
     return check_finite(points.astype(float_dtype(points)), name)
-
-
-def _check_point_count(count: int, degree: int, what: str = "points") -> None:
-    if count < degree + 1:
-        raise ValueError(
-            f"degree {degree} needs at least degree + 1 = {degree + 1} {what}, got {count}"
-        )
 
 
 def _parameters(points: Array, parametrization, closed: bool = False) -> Array:
@@ -74,21 +69,6 @@ def _parameters(points: Array, parametrization, closed: bool = False) -> Array:
             f"u[{k + 1}] = {values[k + 1]}"
         )
     return u
-
-
-def collocation_solve(
-    sites: Array, orders: np.ndarray, knots: Array, degree: int, rhs: Array
-) -> Array:
-    """Control points `P` with `C^(orders[k])(sites[k]) = rhs[k]` for every row `k`.
-
-    The rows must be ordered so that row `k` involves control points `k - p .. k + p`
-    (increasing sites, each derivative row next to its end), which makes the system banded.
-    """
-    span, ders = ders_basis_funs(knots, degree, sites, int(orders.max()))
-    count = sites.shape[0]
-    funs = ders[np.arange(count), orders]
-    band = band_rows(jnp.arange(count), span - degree, funs, count, degree)
-    return solve_banded(band, rhs)
 
 
 def interpolate(
@@ -133,7 +113,7 @@ def interpolate(
     """
     degree = check_degree(degree)
     points = _data_points(points)
-    _check_point_count(points.shape[0], degree)
+    check_control_count(points.shape[0], degree, "points")
     if closed:
         if start_derivative is not None or end_derivative is not None:
             raise ValueError("end derivatives apply to open curves only, got closed=True")
@@ -278,11 +258,7 @@ def approximate(
     """
     degree = check_degree(degree)
     points = _data_points(points)
-    check_control_count(n_control, degree)
-    if n_control > points.shape[0]:
-        raise ValueError(
-            f"n_control must be at most the number of points {points.shape[0]}, got {n_control}"
-        )
+    check_control_count(n_control, degree, at_most=points.shape[0])
     u = _parameters(points, parametrization)
     if knots is None:
         knots = approximation_knots(u, n_control, degree)
@@ -328,9 +304,9 @@ def _point_weights(weights: ArrayLike, count: int) -> Array:
 
 def _grid(points_grid: ArrayLike, degrees: tuple[int, int]) -> Array:
     grid = jnp.asarray(points_grid)
-    check_rank(grid, 3, "points_grid", "(n_u, n_v, dim)")
+    check_rank(grid, 3, "points_grid", "(mu, mv, dim)")
     for count, degree, axis in zip(grid.shape[:2], degrees, "uv", strict=True):
-        _check_point_count(count, degree, f"points along {axis}")
+        check_control_count(count, degree, f"points along {axis}")
     return check_finite(grid.astype(float_dtype(grid)), "points_grid")
 
 
@@ -365,8 +341,7 @@ def _along_both(grid: Array, solve_u, solve_v) -> Array:
 
 def interpolate_surface(
     points_grid: ArrayLike,
-    degree_u: int = 3,
-    degree_v: int = 3,
+    degree: tuple[int, int] = (3, 3),
     parametrization: str = "centripetal",
 ) -> NURBSSurface:
     """The B-spline surface through a grid of points (NURBS Book A9.4).
@@ -376,15 +351,15 @@ def interpolate_surface(
 
     **Arguments:**
 
-    - `points_grid`: array of shape `(n_u, n_v, dim)`, `n_u > degree_u`, `n_v > degree_v`.
-    - `degree_u`, `degree_v`: the degrees.
+    - `points_grid`: array of shape `(mu, mv, dim)`, `mu > p`, `mv > q`.
+    - `degree`: `(p, q)`.
     - `parametrization`: `"uniform"`, `"chord"` or `"centripetal"`.
 
     **Returns:**
 
     A non-rational `NURBSSurface` with `S(u_k, v_l) = Q_kl`.
     """
-    degrees = (check_degree(degree_u, name="degree_u"), check_degree(degree_v, name="degree_v"))
+    degrees = check_degree_pair(degree)
     grid = _grid(points_grid, degrees)
     control, knots = _interpolated_net(grid, grid_parameters(grid, parametrization), degrees)
     return NURBSSurface(control, degrees, knots)
@@ -404,10 +379,8 @@ def _interpolated_net(grid, params, degrees):
 
 def approximate_surface(
     points_grid: ArrayLike,
-    n_control_u: int,
-    n_control_v: int,
-    degree_u: int = 3,
-    degree_v: int = 3,
+    n_control: tuple[int, int],
+    degree: tuple[int, int] = (3, 3),
     parametrization: str = "centripetal",
     *,
     interpolate_ends: bool = True,
@@ -421,10 +394,10 @@ def approximate_surface(
 
     **Arguments:**
 
-    - `points_grid`: array of shape `(n_u, n_v, dim)`.
-    - `n_control_u`, `n_control_v`: control points per direction, from `degree + 1` to the
-      number of grid points in that direction.
-    - `degree_u`, `degree_v`: the degrees.
+    - `points_grid`: array of shape `(mu, mv, dim)`.
+    - `n_control`: `(nu, nv)`, control points per direction, each from the degree plus
+      one to the number of grid points in that direction.
+    - `degree`: `(p, q)`.
     - `parametrization`: `"uniform"`, `"chord"` or `"centripetal"`.
     - `interpolate_ends`: pass through the boundary points as A9.7 does.
 
@@ -432,16 +405,12 @@ def approximate_surface(
 
     A non-rational `NURBSSurface`.
     """
-    degrees = (check_degree(degree_u, name="degree_u"), check_degree(degree_v, name="degree_v"))
+    degrees = check_degree_pair(degree)
     grid = _grid(points_grid, degrees)
-    counts = (n_control_u, n_control_v)
+    counts = check_pair(n_control, "n_control")
     for count, degree, size, axis in zip(counts, degrees, grid.shape[:2], "uv", strict=True):
-        check_control_count(count, degree, f"control points along {axis}")
-        if count > size:
-            raise ValueError(
-                f"n_control_{axis} must be at most the number of grid points along {axis} "
-                f"({size}), got {count}"
-            )
+        name, source = f"control points along {axis}", f"grid points along {axis}"
+        check_control_count(count, degree, name, at_most=size, source=source)
     params = grid_parameters(grid, parametrization)
     control, knots = _approximated_net(grid, params, counts, degrees, interpolate_ends)
     return NURBSSurface(check_solved(control), degrees, knots)

@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._misc import safe_divide
 from ._validate import check_degree, check_finite
 
 # Newton steps: all points together, then the stragglers in groups (see `_minimise`).
@@ -56,19 +57,20 @@ def _query_points(point, dim, dtype):
     return point.reshape(-1, dim), point.shape[:-1]
 
 
-def _domain_samples(knots, degree, count):
-    """`count` parameters in every knot span and as many again spread evenly over the
-    domain (sorted, ends included); the steps between them and each sample's gap (the
-    larger of its two steps), neither less than the even spacing.
+def _domain_samples(breaks, count):
+    """`count` parameters in every span between the sorted `breaks` (the knots of the
+    domain) and as many again spread evenly over the domain (sorted, ends included); the
+    steps between them and each sample's gap (the larger of its two steps), neither less
+    than the even spacing.
 
     Both sets: a short span may hold much of the curve (dense control points there), a
     long one may wind around more than once; the nearest sample must lie in the right
     basin in either case. The floor on steps and gaps keeps a cluster of short spans
     from passing for separate basins in `_starts`."""
-    starts, ends = knots[degree : -degree - 1], knots[degree + 1 : -degree]
-    fractions = jnp.arange(count, dtype=knots.dtype) / count
+    starts, ends = breaks[:-1], breaks[1:]
+    fractions = jnp.arange(count, dtype=breaks.dtype) / count
     per_span = starts[:, None] + (ends - starts)[:, None] * fractions
-    even = jnp.linspace(0.0, 1.0, per_span.size + 1, dtype=knots.dtype)
+    even = jnp.linspace(0.0, 1.0, per_span.size + 1, dtype=breaks.dtype)
     even = starts[0] + (ends[-1] - starts[0]) * even
     samples = jnp.sort(jnp.concatenate([per_span.ravel(), even]))
     steps = jnp.maximum(jnp.diff(samples), even[1] - even[0])
@@ -130,9 +132,7 @@ def _starts(segments, points):
     max_aa = jnp.max(aa)
 
     def foot(along, length2):
-        degenerate = length2 == 0
-        t = jnp.where(degenerate, 0.0, along / jnp.where(degenerate, 1.0, length2))
-        return jnp.clip(t, 0.0, 1.0)
+        return jnp.clip(safe_divide(along, length2), 0.0, 1.0)
 
     def start(point, k):
         t = foot(jnp.dot(point - a[k], d[k]), dd[k])
@@ -291,8 +291,9 @@ def _minimise(model, x, points, lower, upper, done):
 
 
 def _invert(spline, model, starts, points):
-    """Minimise from both starts on frozen values, keep the nearer result, then attach
-    the derivatives of the optimum (see above).
+    """Minimise on frozen values from each query's first start and from those of its
+    other three starts that `_starts` marks as needed, keep the nearest result, then
+    attach the derivatives of the optimum (see above).
 
     `model(spline, x)` gives the points, first and second derivatives at `x` of shape
     `(N, d)`; `starts` is `_starts`'s answer; `spline.domain` gives the bounds.
@@ -336,12 +337,12 @@ def _bounds(spline):
 
 
 def _curve_model(curve, x):
-    ders = curve._derivatives(x[:, 0], 2)
+    ders = curve.derivatives(x[:, 0], 2)
     return ders[:, 0], ders[:, 1, :, None], ders[:, 2, :, None, None]
 
 
 def _surface_model(surface, x):
-    ders = surface._derivatives(x[:, 0], x[:, 1], 2)
+    ders = surface.derivatives(x[:, 0], x[:, 1], 2)
     jac = jnp.stack([ders[:, 1, 0], ders[:, 0, 1]], axis=-1)
     mixed = ders[:, 1, 1]
     hess = jnp.stack(
@@ -368,9 +369,10 @@ def curve_closest_point(
 
 @eqx.filter_jit
 def _curve_parameters(curve, points, samples):
-    u, steps, _ = _domain_samples(curve.knots, curve.degree, samples)
+    p = curve.degree
+    u, steps, _ = _domain_samples(curve.knots[p:-p], samples)
     u, steps = u[:, None], steps[:, None]
-    segments = _segments(lambda x: curve._points(x[:, 0]), u[:-1], u[1:], steps)
+    segments = _segments(lambda x: curve(x[:, 0]), u[:-1], u[1:], steps)
     return _invert(curve, _curve_model, _starts(segments, points), points)[:, 0]
 
 
@@ -378,18 +380,18 @@ def surface_closest_point(
     surface, point: ArrayLike, samples_per_span: int | None = None
 ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
     """Parameters of the points of `surface` nearest to `point` (see
-    `NURBSSurface.closest_point`)."""
-    points, batch = _query_points(point, surface.dim, surface.knots_u.dtype)
-    samples = tuple(_sample_count(samples_per_span, p + 2) for p in surface.degree)
-    u, v = _surface_parameters(surface, points, samples)
+    `AbstractSurface.closest_point`)."""
+    points, batch = _query_points(point, surface.dim, jnp.result_type(surface.domain[0][0]))
+    sampling = surface._sampling()
+    samples = tuple(_sample_count(samples_per_span, default) for _, default in sampling)
+    u, v = _surface_parameters(surface, points, tuple(breaks for breaks, _ in sampling), samples)
     return u.reshape(batch), v.reshape(batch)
 
 
 @eqx.filter_jit
-def _surface_parameters(surface, points, samples):
-    p, q = surface.degree
-    us, u_steps, u_gaps = _domain_samples(surface.knots_u, p, samples[0])
-    vs, v_steps, v_gaps = _domain_samples(surface.knots_v, q, samples[1])
+def _surface_parameters(surface, points, breaks, samples):
+    us, u_steps, u_gaps = _domain_samples(breaks[0], samples[0])
+    vs, v_steps, v_gaps = _domain_samples(breaks[1], samples[1])
 
     def pairs(x, y):
         return jnp.stack(jnp.broadcast_arrays(x[:, None], y[None, :]), axis=-1)
@@ -402,6 +404,6 @@ def _surface_parameters(surface, points, samples):
     extent = jnp.concatenate(
         [pairs(u_steps, v_gaps).reshape(-1, 2), pairs(u_gaps, v_steps).reshape(-1, 2)]
     )
-    segments = _segments(lambda x: surface._points(x[:, 0], x[:, 1]), a_params, b_params, extent)
+    segments = _segments(lambda x: surface(x[:, 0], x[:, 1]), a_params, b_params, extent)
     x = _invert(surface, _surface_model, _starts(segments, points), points)
     return x[:, 0], x[:, 1]

@@ -1,25 +1,25 @@
-"""Knot insertion (Boehm's algorithm, NURBS Book A5.1), refinement, Bezier decomposition,
-degree elevation and knot merging.
+"""Knot insertion and refinement, clamping, Bezier decomposition, degree elevation and
+knot merging.
 
 The functions work on homogeneous control points along axis 0, so the same code serves
 curves and either direction of a surface. Insertion and refinement compute every new
-control point at once as a blossom of the old curve (the Oslo algorithm): the knot values
-may be traced, and the array shapes depend only on how many knots are inserted.
+control point at once as a blossom of the old curve (the Oslo algorithm; the points are
+those of Boehm's NURBS Book A5.1, one knot at a time): the knot values may be traced, and
+the array shapes depend only on how many knots are inserted. Clamping, decomposition and
+elevation need concrete knots, whose multiplicities decide the shapes.
 """
 
 import functools
+import itertools
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._basis import basis_matrix, find_span
-from ._validate import check_degree, concrete
-
-
-def _safe_ratio(num, den):
-    zero = den == 0
-    return jnp.where(zero, 0.0, num / jnp.where(zero, 1.0, den))
+from ._banded import collocation_solve
+from ._basis import basis_funs, combine_local, find_span
+from ._misc import clamp_to_domain, safe_divide
+from ._validate import check_degree, check_parameter, concrete
 
 
 def insert(points, knots, degree, values):
@@ -70,7 +70,7 @@ def _refined(points, knots, degree, values):
             i = span - degree + level + m
             lower = knots[i].reshape(-1, *trailing)
             upper = knots[i + degree + 1 - level].reshape(-1, *trailing)
-            alpha = _safe_ratio(argument - lower, upper - lower)
+            alpha = safe_divide(argument - lower, upper - lower)
             next_column.append((1.0 - alpha) * column[m] + alpha * column[m + 1])
         column = next_column
     return column[0], new_knots
@@ -94,16 +94,28 @@ def check_insertion(knots, degree, u, times):
     return times
 
 
+def checked_insertion(points, knots, degree, u, times):
+    """`insert` of the one value `u`, `times` times, after `check_insertion` (which skips
+    a traced `u`)."""
+    times = check_insertion(knots, degree, u, times)
+    return insert(points, knots, degree, [jnp.asarray(u, knots.dtype)] * times)
+
+
+def checked_refinement(points, knots, degree, values):
+    """`insert` of every knot of `values` after `check_refinement` (which skips traced
+    values)."""
+    values = jnp.ravel(jnp.asarray(values, dtype=knots.dtype))
+    check_refinement(knots, degree, values)
+    return insert(points, knots, degree, values)
+
+
 def check_refinement(knots, degree, values):
     """Concrete knots and values: every value in the domain, and no knot with multiplicity
     above `degree` after insertion (traced ones are not checked)."""
     knots, values = concrete(knots), concrete(values)
     if knots is None or values is None:
         return
-    lower, upper = knots[degree], knots[-degree - 1]
-    outside = values[(values < lower) | (values > upper)]
-    if outside.size:
-        raise ValueError(f"knot {outside[0]} must lie in the domain [{lower}, {upper}]")
+    check_parameter(values, knots[degree], knots[-degree - 1], name="a knot to insert")
     unique, counts = np.unique(values, return_counts=True)
     for value, times in zip(unique, counts, strict=True):
         existing = int(np.sum(knots == value))
@@ -116,7 +128,9 @@ def check_refinement(knots, degree, values):
 
 
 def bezier_segments(points, knots, degree):
-    """Split refined control points into Bezier pieces (clamped, concrete knots).
+    """The Bezier pieces of the curve (clamped, concrete knots): every interior knot is
+    inserted up to multiplicity `degree`, and the control points are cut into runs of
+    `degree + 1` that share their end points.
 
     **Returns:**
 
@@ -144,10 +158,57 @@ def span_breaks(knots, degree):
     return np.unique(np.asarray(knots)[degree : len(knots) - degree])
 
 
+def bezier_pieces(points, knots, degree):
+    """`(points, knots)` of every Bezier piece (`bezier_segments`), each with the knot
+    vector of its own span."""
+    breaks = span_breaks(knots, degree)
+    pieces = bezier_segments(points, knots, degree)
+    return [
+        (piece, bezier_knots(a, b, degree, knots.dtype))
+        for piece, a, b in zip(pieces, breaks[:-1], breaks[1:], strict=True)
+    ]
+
+
 def greville(knots, degree):
     """Greville abscissae `(u_{i+1} + ... + u_{i+p}) / p`, one per control point."""
     n_control = knots.shape[0] - degree - 1
     return sum(knots[1 + j : 1 + j + n_control] for j in range(degree)) / degree
+
+
+def _concrete_knots(knots, operation):
+    values = concrete(knots)
+    if values is None:
+        raise ValueError(
+            f"{operation} needs concrete knots: their multiplicities decide the new knot vector"
+        )
+    return values
+
+
+def clamp(points, knots, degree):
+    """The same curve on its domain `[a, b] = [knots[p], knots[n + 1]]` with clamped knots:
+    `a` and `b` each `p + 1` times, and no knots beyond them (concrete knots).
+
+    Each end is inserted until it has multiplicity `p` (`insert`, which leaves the curve
+    unchanged). Then the basis functions that vanish on the domain are dropped with their
+    control points, and the one knot left beyond each end is set to the end: no basis
+    function evaluated on the domain reads it. Clamped knots come back as they are.
+
+    **Returns:**
+
+    `(points, knots)`, fewer of each when the knots extended beyond the domain.
+    """
+    values = _concrete_knots(knots, "clamping")
+    a, b = values[degree], values[-degree - 1]
+    missing = [max(degree - int(np.sum(values == end)), 0) for end in (a, b)]
+    points, knots = insert(points, knots, degree, np.repeat([a, b], missing))
+    values = np.asarray(knots)
+    # Span [a, ...) is the one after the last a; it reads control points from `first` on and
+    # knots from `first + 1` on. The span (..., b] reads up to the knot before `stop + p`.
+    first = int(np.searchsorted(values, a, side="right")) - 1 - degree
+    stop = int(np.searchsorted(values, b, side="left"))
+    index = np.arange(first, stop + degree + 1)
+    index[0], index[-1] = first + 1, stop + degree - 1
+    return points[first:stop], knots[index]
 
 
 def _elevated_knot_indices(knots, times):
@@ -159,14 +220,20 @@ def _elevated_knot_indices(knots, times):
 
 
 def elevate(points, knots, degree, times):
-    """Raise the degree by `times` without changing the curve.
+    """Raise the degree by `times` without changing the curve on its domain.
 
-    The curve lies in the spline space of degree `p + times` whose knots are the old ones,
-    each distinct value `times` more often (the continuity at a knot stays the same). Its
-    control points there are found by collocation at the Greville abscissae of that space,
-    which satisfy the Schoenberg-Whitney condition, so the system is square and regular.
-    This replaces NURBS Book A5.9 (Bezier decomposition, elevation, knot removal) with one
-    banded solve, and it is differentiable in the control points.
+    The knots are clamped first (`clamp`): beyond the domain, basis functions of the
+    elevated space would vanish at every collocation site and make the system singular.
+    A knot of multiplicity `p + 1` inside the domain splits the curve into pieces that
+    share no control point; each is elevated on its own. On a piece, the curve lies in the
+    spline space of degree `q = p + times` whose knots are the old ones, each distinct
+    value `times` more often (the continuity at every knot stays the same). Its control
+    points there are found by collocation at the Greville abscissae of that space, which
+    satisfy the Schoenberg-Whitney condition: the system is square, regular, banded (row
+    `k` involves control points `k - q .. k + q`) and totally positive, and
+    `collocation_solve` solves it in O(n) without pivoting. This replaces NURBS Book A5.9
+    (Bezier decomposition, elevation, knot removal), and it is differentiable in the
+    control points.
 
     **Arguments:**
 
@@ -177,20 +244,42 @@ def elevate(points, knots, degree, times):
 
     **Returns:**
 
-    `(points, knots)` of degree `p + times`.
+    `(points, knots)` of degree `p + times`, with clamped knots.
     """
-    values = concrete(knots)
-    if values is None:
-        raise ValueError(
-            "degree elevation needs concrete knots: their multiplicities decide the new knot vector"
-        )
-    new_degree = degree + times
-    new_knots = knots[_elevated_knot_indices(values, times)]
-    sites = greville(new_knots, new_degree)
+    _concrete_knots(knots, "degree elevation")
+    points, knots = clamp(points, knots, degree)
+    values = np.asarray(knots)
+    # The first knot of every run of p + 1 equal ones inside the domain starts a piece.
+    starts = np.flatnonzero(values[degree + 1 : -degree - 1] == values[2 * degree + 1 : -1])
+    cuts = [0, *(starts + degree + 1), points.shape[0]]
+    pieces = [
+        _elevate_piece(points[i:j], knots[i : j + degree + 1], degree, times)
+        for i, j in itertools.pairwise(cuts)
+    ]
+    new_points = jnp.concatenate([piece for piece, _ in pieces])
+    new_knots = jnp.concatenate(
+        [pieces[0][1], *(piece_knots[degree + times + 1 :] for _, piece_knots in pieces[1:])]
+    )
+    return new_points, new_knots
+
+
+def _elevate_piece(points, knots, degree, times):
+    """`elevate` on clamped knots whose interior knots repeat at most `p` times."""
+    new_knots = knots[_elevated_knot_indices(np.asarray(knots), times)]
+    return _elevated_points(points, knots, new_knots, degree, degree + times), new_knots
+
+
+# One compiled program per shape, as for `_refined`.
+@functools.partial(jax.jit, static_argnums=(3, 4))
+def _elevated_points(points, knots, new_knots, degree, new_degree):
+    # Rounding can put the mean of equal end knots a hair outside the domain.
+    sites = clamp_to_domain(greville(new_knots, new_degree), knots[0], knots[-1])
     flat = points.reshape(points.shape[0], -1)
-    values_at_sites = basis_matrix(knots, degree, sites) @ flat
-    new_points = jnp.linalg.solve(basis_matrix(new_knots, new_degree, sites), values_at_sites)
-    return new_points.reshape((-1, *points.shape[1:])), new_knots
+    span, funs = basis_funs(knots, degree, sites)
+    rhs = combine_local(funs, flat, span, degree)
+    orders = np.zeros(sites.shape[0], dtype=int)
+    new_points = collocation_solve(sites, orders, new_knots, new_degree, rhs)
+    return new_points.reshape((-1, *points.shape[1:]))
 
 
 def missing_knots(knots, target):

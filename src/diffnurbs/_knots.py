@@ -7,17 +7,18 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._misc import safe_norm, safe_sqrt
 from ._validate import check_control_count, check_degree, check_rank, concrete, float_dtype
 
 
 def clamped_knots(
     n_control: int, degree: int, domain=(0.0, 1.0), dtype=None
-) -> Float[Array, " n+p+1"]:
+) -> Float[Array, " n_control+p+1"]:
     """Clamped uniform knot vector: `degree + 1` equal knots at each end, interior evenly spaced.
 
     **Arguments:**
 
-    - `n_control`: number of control points `n + 1`.
+    - `n_control`: number of control points.
     - `degree`: the degree `p`.
     - `domain`: `(a, b)`, the parameter interval.
     - `dtype`: floating dtype; the default float type when None.
@@ -50,13 +51,10 @@ def chord_steps(points: Array, method: str) -> Array:
     `e = 0, 1, 1/2` for uniform, chord and centripetal."""
     if method == "uniform":
         return jnp.ones((*points.shape[:-2], points.shape[-2] - 1), dtype=points.dtype)
-    squared = jnp.sum(jnp.diff(points, axis=-2) ** 2, axis=-1)
-    # Double where: sqrt at zero has an infinite gradient, and duplicates are legal under
+    # Safe roots: sqrt at zero has an infinite gradient, and duplicates are legal under
     # tracing (they are rejected only when the points are concrete).
-    positive = squared > 0
-    safe = jnp.where(positive, squared, 1.0)
-    power = 0.5 if method == "chord" else 0.25
-    return jnp.where(positive, safe**power, 0.0)
+    distance = safe_norm(jnp.diff(points, axis=-2))
+    return distance if method == "chord" else safe_sqrt(distance)
 
 
 def normalized_cumsum(steps: Array) -> tuple[Array, Array]:
@@ -152,7 +150,9 @@ def averaged_knots(u: ArrayLike, degree: int) -> Float[Array, " m+p+1"]:
 
 
 @functools.partial(jax.jit, static_argnames=("n_control", "degree"))
-def approximation_knots(u: ArrayLike, n_control: int, degree: int) -> Float[Array, " n+p+1"]:
+def approximation_knots(
+    u: ArrayLike, n_control: int, degree: int
+) -> Float[Array, " n_control+p+1"]:
     """Clamped knots for a least-squares fit of `n_control` points to data at parameters `u`
     (NURBS Book eq. 9.68-9.69).
 
@@ -172,11 +172,7 @@ def approximation_knots(u: ArrayLike, n_control: int, degree: int) -> Float[Arra
     """
     degree = check_degree(degree)
     u = jnp.asarray(u)
-    check_control_count(n_control, degree)
-    if n_control > u.shape[0]:
-        raise ValueError(
-            f"n_control must be at most the number of data points {u.shape[0]}, got {n_control}"
-        )
+    check_control_count(n_control, degree, at_most=u.shape[0], source="parameters")
     d = u.shape[0] / (n_control - degree)
     steps = [j * d for j in range(1, n_control - degree)]
     index = np.array([int(s) for s in steps], dtype=int)

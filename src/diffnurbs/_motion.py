@@ -9,7 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
 
-from ._curve import NURBSCurve, safe_norm
+from ._curve import NURBSCurve
+from ._misc import safe_norm
 from ._shapes import arc_net
 from ._surface import NURBSSurface
 from ._validate import concrete
@@ -47,7 +48,7 @@ def extrude(curve: NURBSCurve, direction: ArrayLike, length: ArrayLike) -> NURBS
 
     **Returns:**
 
-    A `NURBSSurface` with `control_points.shape == (n + 1, 2, dim)`.
+    A `NURBSSurface` with `control_points.shape == (n_control, 2, dim)`.
     """
     step = jnp.asarray(length) * _unit_vector(direction, "direction", curve.dim)
     points = jnp.stack([curve.control_points, curve.control_points + step], axis=1)

@@ -7,70 +7,14 @@ basis interpolates none of them (one C2 segment of a uniform B-spline); the Catm
 basis interpolates `G_1` and `G_2` (the segment between the middle points). The tensor
 product of two such segments is a bicubic patch.
 
-The matrices are stored as NumPy float64 constants (JAX arrays made at import time would
-be frozen at the dtype of that moment) and converted when used.
+The basis matrices come from `cubic_matrix`.
 """
 
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._cubic import basis_or_matrix
 from ._validate import check_parameter, check_rank
-
-BEZIER_MATRIX = np.array(
-    [[-1.0, 3.0, -3.0, 1.0], [3.0, -6.0, 3.0, 0.0], [-3.0, 3.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0]]
-)
-"""The cubic Bezier basis matrix `M_B` (rows: coefficients of t^3, t^2, t, 1)."""
-
-BSPLINE_MATRIX = (
-    np.array(
-        [[-1.0, 3.0, -3.0, 1.0], [3.0, -6.0, 3.0, 0.0], [-3.0, 0.0, 3.0, 0.0], [1.0, 4.0, 1.0, 0.0]]
-    )
-    / 6.0
-)
-"""The uniform cubic B-spline basis matrix `(1/6) [[-1,3,-3,1],[3,-6,3,0],[-3,0,3,0],[1,4,1,0]]`."""
-
-CATMULL_ROM_MATRIX = (
-    np.array(
-        [
-            [-1.0, 3.0, -3.0, 1.0],
-            [2.0, -5.0, 4.0, -1.0],
-            [-1.0, 0.0, 1.0, 0.0],
-            [0.0, 2.0, 0.0, 0.0],
-        ]
-    )
-    / 2.0
-)
-"""The Catmull-Rom basis matrix `(1/2) [[-1,3,-3,1],[2,-5,4,-1],[-1,0,1,0],[0,2,0,0]]`."""
-
-_BASES = {"bezier": BEZIER_MATRIX, "bspline": BSPLINE_MATRIX, "catmull-rom": CATMULL_ROM_MATRIX}
-
-
-def cubic_basis_matrix(kind: str, dtype=None) -> Float[Array, "4 4"]:
-    """One of the three cubic basis matrices of seed 002.
-
-    **Arguments:**
-
-    - `kind`: `"bezier"`, `"bspline"` (uniform cubic B-spline) or `"catmull-rom"`.
-    - `dtype`: floating dtype of the result (default: JAX's default float).
-
-    **Returns:**
-
-    Array of shape `(4, 4)`, rows the coefficients of `t^3, t^2, t, 1`.
-    """
-    if not isinstance(kind, str) or kind.lower() not in _BASES:
-        raise ValueError(f"kind must be one of {sorted(_BASES)}, got {kind!r}")
-    return jnp.asarray(_BASES[kind.lower()], dtype=dtype or jnp.result_type(float))
-
-
-def basis_or_matrix(basis, dtype, named=cubic_basis_matrix) -> Float[Array, "4 4"]:
-    """The matrix `named(basis, dtype)` when `basis` is a name, else `basis` as a `(4, 4)` array."""
-    if isinstance(basis, str):
-        return named(basis, dtype)
-    matrix = jnp.asarray(basis, dtype=dtype)
-    if matrix.shape != (4, 4):
-        raise ValueError(f"a basis matrix must have shape (4, 4), got {matrix.shape}")
-    return matrix
 
 
 def _power_row(t):
@@ -90,7 +34,8 @@ def bicubic_patch(
 
     - `geometry`: array of shape `(4, 4, dim)`.
     - `u`, `v`: parameters in [0, 1], broadcast against each other.
-    - `basis`: `"bezier"`, `"bspline"`, `"catmull-rom"`, or a `(4, 4)` basis matrix.
+    - `basis`: a name of `cubic_matrix` (`"bezier"`, `"bspline"`, `"catmull-rom"`,
+      `"hermite"`), or a `(4, 4)` basis matrix.
 
     **Returns:**
 

@@ -79,10 +79,6 @@ def alphas(coeffs: Array) -> tuple[Array, Array]:
     return coeffs[..., 0] + 1j * coeffs[..., 2], coeffs[..., 1] + 1j * coeffs[..., 3]
 
 
-def from_alphas(alpha0: Array, alpha1: Array) -> Array:
-    return jnp.stack([alpha0.real, alpha1.real, alpha0.imag, alpha1.imag], axis=-1)
-
-
 def chord(alpha0: Array, alpha1: Array) -> Array:
     """`P(1) - P(0) = int_0^1 w(u)^2 du = alpha0^2 + alpha0 alpha1 + alpha1^2 / 3`."""
     return alpha0 * alpha0 + alpha0 * alpha1 + alpha1 * alpha1 / 3

@@ -37,7 +37,7 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, ArrayLike, Float
 
-from ._cubic import HERMITE_MATRIX
+from ._cubic import cubic_matrix
 from ._ph_cubic import alphas, as_point, tension_scale, to_complex, to_real
 from ._validate import concrete, float_dtype
 
@@ -60,7 +60,7 @@ def cardinal_matrix(s: Array) -> Array:
             jnp.stack([zero, -s, zero, s]),
         ]
     )
-    return jnp.asarray(HERMITE_MATRIX, dtype=s.dtype) @ hermite_geometry
+    return cubic_matrix("hermite", s.dtype) @ hermite_geometry
 
 
 def eq8_residual(unknowns: Array, args: tuple[Array, Array]) -> Array:

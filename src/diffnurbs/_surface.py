@@ -1,30 +1,28 @@
-"""Tensor-product NURBS surfaces."""
+"""Surfaces: the abstract base every surface shares, and tensor-product NURBS surfaces."""
+
+import abc
+import typing
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
-from ._basis import basis_funs, dense_basis, ders_basis_funs
-from ._curve import clamp_to_domain, combine_local, local_indices, safe_norm, safe_normalize
+from ._basis import basis_funs, combine_local, dense_basis, ders_basis_funs, local_indices
 from ._inversion import surface_closest_point
-from ._knotops import (
-    bezier_knots,
-    bezier_segments,
-    check_insertion,
-    check_refinement,
-    elevate,
-    insert,
-    span_breaks,
-)
+from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
 from ._knots import clamped_knots
+from ._misc import clamp_to_domain, safe_norm, safe_normalize
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_surface_derivatives
 from ._validate import (
     check_control_count,
     check_degree,
+    check_degree_pair,
     check_finite,
     check_grid_axes,
     check_knots,
     check_order,
+    check_pair,
     check_parameter,
     check_rank,
     check_weights,
@@ -36,13 +34,156 @@ from ._validate import (
 _DENSE_GRID_LIMIT = 64
 
 
-def _pair(value, name):
-    if not isinstance(value, (tuple, list)) or len(value) != 2:
-        raise ValueError(f"{name} must be a pair (u direction, v direction), got {value!r}")
-    return tuple(value)
+class AbstractSurface(eqx.Module):
+    """A parametric surface `S(u, v)` on a rectangle of parameters.
+
+    The public methods (`__call__`, `grid`, `derivatives`, `normal`, `closest_point`)
+    check concrete parameters against `domain` and call the evaluation hooks below on
+    arrays; under `jit` parameters are not checked and the hooks clamp them. Subclasses
+    (`NURBSSurface`, `CoonsPatch`, `KinematicSweep`) are final and implement:
+
+    - `domain`: `((u_min, u_max), (v_min, v_max))`;
+    - `_points(u, v)`: points at broadcast parameter arrays;
+    - `_grid(us, vs)`: points on the tensor grid of two 1-D arrays;
+    - `_derivatives(u, v, order)`: the partials `d^(k+l) S / du^k dv^l`, `k, l <= order`
+      (`autodiff_partials` derives them from `_points` where no closed form is at hand);
+    - `_sampling()`: for each direction, the parameters between which the surface is
+      smooth (knots) and how many samples per such span point inversion starts from.
+
+    So `viz.surface_mesh`, `io.tessellate` and `closest_point` work on every surface.
+    """
+
+    @property
+    @abc.abstractmethod
+    def domain(self) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
+        """`((u_min, u_max), (v_min, v_max))`."""
+
+    @property
+    @abc.abstractmethod
+    def dim(self) -> int:
+        """Dimension of the space the surface lives in."""
+
+    @abc.abstractmethod
+    def _points(self, u: Array, v: Array) -> Array:
+        """Points at parameter arrays of one shape."""
+
+    @abc.abstractmethod
+    def _grid(self, us: Array, vs: Array) -> Array:
+        """Points on the grid `us x vs` of two 1-D parameter arrays."""
+
+    @abc.abstractmethod
+    def _derivatives(self, u: Array, v: Array, order: int) -> Array:
+        """Partials up to `order` at parameter arrays of one shape."""
+
+    @abc.abstractmethod
+    def _sampling(self) -> tuple[tuple[Array, int], tuple[Array, int]]:
+        """`((breaks_u, samples_u), (breaks_v, samples_v))` for point inversion."""
+
+    def _parameters(self, u, v):
+        """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""
+        (u0, u1), (v0, v1) = self.domain
+        dtype = jnp.result_type(u0)
+        u, v = jnp.asarray(u, dtype=dtype), jnp.asarray(v, dtype=dtype)
+        check_parameter(u, u0, u1, "u")
+        check_parameter(v, v0, v1, "v")
+        return u, v
+
+    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... dim"]:
+        """Points `S(u, v)`; `u` and `v` broadcast against each other."""
+        return self._points(*jnp.broadcast_arrays(*self._parameters(u, v)))
+
+    def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
+        """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`."""
+        us, vs = self._parameters(us, vs)
+        check_grid_axes(us, vs)
+        return self._grid(us, vs)
+
+    def derivatives(self, u: ArrayLike, v: ArrayLike, order: int) -> Float[Array, "... k l dim"]:
+        """All partial derivatives `d^(k+l) S / du^k dv^l` for `0 <= k, l <= order`.
+
+        **Returns:**
+
+        Array of shape `broadcast(u, v).shape + (order + 1, order + 1, dim)`.
+        """
+        u, v = jnp.broadcast_arrays(*self._parameters(u, v))
+        return self._derivatives(u, v, check_order(order))
+
+    def normal(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... 3"]:
+        """Unit normal `S_u x S_v / |S_u x S_v|` of a surface in 3D.
+
+        Zero where the surface is degenerate (a pole, a collapsed edge): there
+        `|S_u x S_v|` is rounding noise, below `64 eps (|S_u|^2 + |S_v|^2)`.
+        """
+        if self.dim != 3:
+            raise ValueError(f"normal needs a surface in 3D, got dim = {self.dim}")
+        ders = self.derivatives(u, v, 1)
+        s_u, s_v = ders[..., 1, 0, :], ders[..., 0, 1, :]
+        cross = jnp.cross(s_u, s_v)
+        scale = jnp.sum(s_u * s_u, -1) + jnp.sum(s_v * s_v, -1)
+        noise = 64 * jnp.finfo(cross.dtype).eps * scale
+        degenerate = (safe_norm(cross) <= noise)[..., None]
+        return jnp.where(degenerate, 0.0, safe_normalize(cross))
+
+    def closest_point(
+        self, point: ArrayLike, samples_per_span: int | None = None
+    ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
+        """Point inversion: the parameters `(u, v)` of the point `S(u, v)` nearest to `point`.
+
+        Every query starts from the nearest segment of the grid lines through
+        `samples_per_span` samples in each span between knots in each direction, and as
+        many again spread evenly (default `p + 2` for a NURBS surface of degree `p`; near
+        ties, as across a seam, start from each candidate), then a projected Newton method
+        on `|S(u, v) - P|^2` converges inside the domain: on an edge or at a corner where
+        the distance still falls beyond it. `jax.grad` of the result reaches the points and
+        the surface. See `_inversion`.
+
+        **Arguments:**
+
+        - `point`: array of shape `(..., dim)`: one point or many.
+        - `samples_per_span`: samples per span in each direction for the start; raise it
+          for surfaces that fold within a span (the start grid must resolve every fold for
+          the nearest of several minima to be found).
+
+        **Returns:**
+
+        A pair `(u, v)` of arrays of shape `point.shape[:-1]`, so that
+        `surface(*surface.closest_point(point))` is the nearest point.
+        """
+        return surface_closest_point(self, point, samples_per_span)
 
 
-class NURBSSurface(AbstractRationalSpline):
+def autodiff_partials(points, u: Array, v: Array, order: int) -> Array:
+    """The partials `d^(k+l) S / du^k dv^l`, `0 <= k, l <= order`, of `points(u, v)` by
+    nested forward-mode autodiff: for surfaces with no closed form for their derivatives.
+
+    **Arguments:**
+
+    - `points`: `S(u, v)` for scalar parameters, returning an array `(dim,)`.
+    - `u`, `v`: parameter arrays of one shape.
+    - `order`: highest order in each direction.
+
+    **Returns:**
+
+    Array of shape `u.shape + (order + 1, order + 1, dim)`.
+    """
+
+    def table(u, v):
+        rows, along_u = [], points
+        for _ in range(order + 1):
+            row, along_v = [], along_u
+            for _ in range(order + 1):
+                row.append(along_v(u, v))
+                along_v = jax.jacfwd(along_v, argnums=1)
+            rows.append(jnp.stack(row))
+            along_u = jax.jacfwd(along_u, argnums=0)
+        return jnp.stack(rows)
+
+    flat = jax.vmap(table)(jnp.ravel(u), jnp.ravel(v))
+    return flat.reshape(u.shape + flat.shape[1:])
+
+
+@typing.final
+class NURBSSurface(AbstractRationalSpline, AbstractSurface):
     """A (rational) tensor-product B-spline surface
 
     `S(u, v) = sum_ij N_{i,p}(u) N_{j,q}(v) w_ij P_ij / sum_ij N_{i,p}(u) N_{j,q}(v) w_ij`.
@@ -72,8 +213,7 @@ class NURBSSurface(AbstractRationalSpline):
         - `knots`: `(U, V)`; None gives clamped uniform knots on [0, 1] in both directions.
         - `weights`: positive array of shape `(nu, nv)`; None gives a non-rational surface.
         """
-        p, q = _pair(degree, "degree")
-        self.degree = (check_degree(p, name="degree p"), check_degree(q, name="degree q"))
+        self.degree = check_degree_pair(degree)
         points = jnp.asarray(control_points)
         check_rank(points, 3, "control_points", "(nu, nv, dim)")
         check_control_count(points.shape[0], self.degree[0], "control points along u")
@@ -90,7 +230,7 @@ class NURBSSurface(AbstractRationalSpline):
                 clamped_knots(n, d, dtype=dtype)
                 for n, d in zip(points.shape[:2], self.degree, strict=True)
             )
-        knots_u, knots_v = (jnp.asarray(k, dtype=dtype) for k in _pair(knots, "knots"))
+        knots_u, knots_v = (jnp.asarray(k, dtype=dtype) for k in check_pair(knots, "knots"))
         self.knots_u = check_knots(knots_u, points.shape[0], self.degree[0], "knots U")
         self.knots_v = check_knots(knots_v, points.shape[1], self.degree[1], "knots V")
         if weights is not None:
@@ -131,29 +271,29 @@ class NURBSSurface(AbstractRationalSpline):
             )
         return self._from_homogeneous_points(points, knots, self.knots_v, (degree, self.degree[1]))
 
-    def insert_knot(self, value: ArrayLike, direction: str = "u", times: int = 1) -> "NURBSSurface":
+    def insert_knot(
+        self, value: ArrayLike, times: int = 1, *, direction: str = "u"
+    ) -> "NURBSSurface":
         """The same surface with a knot inserted `times` times along `direction` ("u" or "v").
 
-        Boehm's algorithm (NURBS Book A5.3) on every row or column of the net.
+        The control points of NURBS Book A5.3 (Boehm's algorithm on every row or column of
+        the net), computed at once (see `NURBSCurve.insert_knot`).
         """
 
         def operation(points, knots, degree):
-            count = check_insertion(knots, degree, value, times)
-            return insert(points, knots, degree, [jnp.asarray(value, knots.dtype)] * count)
+            return checked_insertion(points, knots, degree, value, times)
 
         return self._along(direction, operation)
 
-    def refine(self, values: ArrayLike, direction: str = "u") -> "NURBSSurface":
+    def refine(self, values: ArrayLike, *, direction: str = "u") -> "NURBSSurface":
         """The same surface with every knot of `values` inserted along `direction`."""
 
         def operation(points, knots, degree):
-            flat = jnp.ravel(jnp.asarray(values, dtype=knots.dtype))
-            check_refinement(knots, degree, flat)
-            return insert(points, knots, degree, flat)
+            return checked_refinement(points, knots, degree, values)
 
         return self._along(direction, operation)
 
-    def elevate_degree(self, times: int = 1, direction: str = "u") -> "NURBSSurface":
+    def elevate_degree(self, times: int = 1, *, direction: str = "u") -> "NURBSSurface":
         """The same surface with its degree along `direction` raised by `times`
         (see `NURBSCurve.elevate_degree`)."""
         times = check_degree(times, minimum=1, name="times")
@@ -161,31 +301,17 @@ class NURBSSurface(AbstractRationalSpline):
 
     def decompose(self) -> list[list["NURBSSurface"]]:
         """The Bezier patches of the surface, `patches[i][j]` on the i-th u and j-th v span."""
-        (p, q), dtype = self.degree, self.knots_u.dtype
-        breaks_u, breaks_v = span_breaks(self.knots_u, p), span_breaks(self.knots_v, q)
-        strips = bezier_segments(self.homogeneous_points(), self.knots_u, p)
+        p, q = self.degree
         patches = []
-        for strip, u0, u1 in zip(strips, breaks_u[:-1], breaks_u[1:], strict=True):
-            knots_u = bezier_knots(u0, u1, p, dtype)
-            pieces = bezier_segments(jnp.swapaxes(strip, 0, 1), self.knots_v, q)
+        for strip, knots_u in bezier_pieces(self.homogeneous_points(), self.knots_u, p):
+            pieces = bezier_pieces(jnp.swapaxes(strip, 0, 1), self.knots_v, q)
             patches.append(
                 [
-                    self._from_homogeneous_points(
-                        jnp.swapaxes(piece, 0, 1), knots_u, bezier_knots(v0, v1, q, dtype)
-                    )
-                    for piece, v0, v1 in zip(pieces, breaks_v[:-1], breaks_v[1:], strict=True)
+                    self._from_homogeneous_points(jnp.swapaxes(piece, 0, 1), knots_u, knots_v)
+                    for piece, knots_v in pieces
                 ]
             )
         return patches
-
-    def _parameters(self, u, v):
-        """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""
-        (u0, u1), (v0, v1) = self.domain
-        u = jnp.asarray(u, dtype=self.knots_u.dtype)
-        v = jnp.asarray(v, dtype=self.knots_u.dtype)
-        check_parameter(u, u0, u1, "u")
-        check_parameter(v, v0, v1, "v")
-        return u, v
 
     def _clamp(self, u, v):
         (u0, u1), (v0, v1) = self.domain
@@ -197,10 +323,6 @@ class NURBSSurface(AbstractRationalSpline):
         rows = local_indices(span_u, p)[..., :, None]
         cols = local_indices(span_v, q)[..., None, :]
         return self.homogeneous_points()[rows, cols]
-
-    def __call__(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... dim"]:
-        """Points `S(u, v)`; `u` and `v` broadcast against each other."""
-        return self._points(*self._parameters(u, v))
 
     @eqx.filter_jit
     def _points(self, u: Array, v: Array) -> Array:
@@ -223,19 +345,11 @@ class NURBSSurface(AbstractRationalSpline):
             columns = [column / columns[-1] for column in columns[:-1]]
         return jnp.stack(columns, axis=-1)
 
-    def grid(self, us: ArrayLike, vs: ArrayLike) -> Float[Array, "mu mv dim"]:
-        """Points on the tensor grid `us x vs`, shape `(len(us), len(vs), dim)`.
-
-        Contracts one direction at a time, with basis matrices `(len(us), nu)` and
-        `(len(vs), nv)`: two matrix products when the net is small, and the banded
-        `p + 1` non-zeros per row (gathers) when it is large.
-        """
-        us, vs = self._parameters(us, vs)
-        check_grid_axes(us, vs)
-        return self._grid(us, vs)
-
     @eqx.filter_jit
     def _grid(self, us: Array, vs: Array) -> Array:
+        # One direction at a time, with basis matrices (len(us), nu) and (len(vs), nv): two
+        # matrix products when the net is small, the banded p + 1 non-zeros per row
+        # (gathers) when it is large.
         us, vs = self._clamp(us, vs)
         (p, q), points = self.degree, self.homogeneous_points()
         span_u, funs_u = basis_funs(self.knots_u, p, us)
@@ -250,20 +364,10 @@ class NURBSSurface(AbstractRationalSpline):
             grid = jnp.einsum("jb,ijbd->ijd", funs_v, cols)
         return from_homogeneous(grid) if self.rational else grid
 
-    def derivatives(self, u: ArrayLike, v: ArrayLike, order: int) -> Float[Array, "... k l dim"]:
-        """All partial derivatives `d^(k+l) S / du^k dv^l` for `0 <= k, l <= order`.
-
-        SurfaceDerivs (NURBS Book A3.6) on the homogeneous surface, then the Leibniz rule
-        (A4.4) when rational.
-
-        **Returns:**
-
-        Array of shape `broadcast(u, v).shape + (order + 1, order + 1, dim)`.
-        """
-        return self._derivatives(*self._parameters(u, v), check_order(order))
-
     @eqx.filter_jit
     def _derivatives(self, u: Array, v: Array, order: int) -> Array:
+        # SurfaceDerivs (NURBS Book A3.6) on the homogeneous net, then the Leibniz rule
+        # (A4.4) when rational.
         u, v = jnp.broadcast_arrays(*self._clamp(u, v))
         span_u, ders_u = ders_basis_funs(self.knots_u, self.degree[0], u, order)
         span_v, ders_v = ders_basis_funs(self.knots_v, self.degree[1], v, order)
@@ -273,45 +377,6 @@ class NURBSSurface(AbstractRationalSpline):
             return homogeneous
         return rational_surface_derivatives(homogeneous[..., :-1], homogeneous[..., -1])
 
-    def normal(self, u: ArrayLike, v: ArrayLike) -> Float[Array, "... 3"]:
-        """Unit normal `S_u x S_v / |S_u x S_v|` of a surface in 3D.
-
-        Zero where the surface is degenerate (a pole, a collapsed edge): there
-        `|S_u x S_v|` is rounding noise, below `64 eps (|S_u|^2 + |S_v|^2)`.
-        """
-        if self.dim != 3:
-            raise ValueError(f"normal needs a surface in 3D, got dim = {self.dim}")
-        ders = self.derivatives(u, v, 1)
-        s_u, s_v = ders[..., 1, 0, :], ders[..., 0, 1, :]
-        cross = jnp.cross(s_u, s_v)
-        scale = jnp.sum(s_u * s_u, -1) + jnp.sum(s_v * s_v, -1)
-        noise = 64 * jnp.finfo(cross.dtype).eps * scale
-        degenerate = (safe_norm(cross) <= noise)[..., None]
-        return jnp.where(degenerate, 0.0, safe_normalize(cross))
-
-    def closest_point(
-        self, point: ArrayLike, samples_per_span: int | None = None
-    ) -> tuple[Float[Array, "..."], Float[Array, "..."]]:
-        """Point inversion: the parameters `(u, v)` of the point `S(u, v)` nearest to `point`.
-
-        Every query starts from the nearest segment of the grid lines through
-        `samples_per_span` times as many samples as there are knot spans in each
-        direction, spread evenly, and the knots (default `p + 2` and `q + 2`; near-ties,
-        as across a seam, start from both candidates), then a projected Newton method on
-        `|S(u, v) - P|^2` converges inside the domain: on an edge or at a corner where
-        the distance still falls beyond it. `jax.grad` of the result reaches the points
-        and the surface. See `_inversion`.
-
-        **Arguments:**
-
-        - `point`: array of shape `(..., dim)`: one point or many.
-        - `samples_per_span`: samples per knot span (on average) in each direction for
-          the start; raise it for nets that fold within a span (the start grid must
-          resolve every fold for the nearest of several minima to be found).
-
-        **Returns:**
-
-        A pair `(u, v)` of arrays of shape `point.shape[:-1]`, so that
-        `surface(*surface.closest_point(point))` is the nearest point.
-        """
-        return surface_closest_point(self, point, samples_per_span)
+    def _sampling(self):
+        (p, q), (knots_u, knots_v) = self.degree, self.knots
+        return (knots_u[p:-p], p + 2), (knots_v[q:-q], q + 2)

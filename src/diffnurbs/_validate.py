@@ -1,9 +1,11 @@
 """Input checks shared by curves and surfaces.
 
 Concrete arrays are checked eagerly and raise `ValueError` naming the problem and the
-expected value. Traced arrays (inside `jit` or `grad`) cannot be inspected, so value
-checks there go through `eqx.error_if`, which raises when the compiled code runs.
-Shape checks are static and always raise `ValueError`.
+expected value. Traced arrays (inside `jit` or `grad`) cannot be inspected: the checks of
+knots, weights and finiteness go through `eqx.error_if` there, which raises when the
+compiled code runs; parameters (`check_parameter`) and the inputs of the basis functions
+(`check_basis_arguments`) are not checked at all. Shape and count checks are static and
+always raise `ValueError`.
 """
 
 import equinox as eqx
@@ -72,7 +74,11 @@ def check_weights(weights, shape, name="weights"):
 
 
 def check_knots(knots, n_control, degree, name="knots"):
-    """Length n + p + 1, finite, non-decreasing, multiplicity <= p + 1, non-empty domain."""
+    """Length n + p + 1, finite, non-decreasing, multiplicity <= p + 1, non-empty domain.
+
+    The length is checked always; the values when concrete (`ValueError` naming the first
+    fault), and when traced through one `eqx.error_if` for all four value conditions.
+    """
     check_rank(knots, 1, name, "(a knot vector)")
     expected = n_control + degree + 1
     if knots.shape[0] != expected:
@@ -83,9 +89,15 @@ def check_knots(knots, n_control, degree, name="knots"):
     values = concrete(knots)
     if values is None:
         bad = ~jnp.all(jnp.isfinite(knots)) | jnp.any(jnp.diff(knots) < 0)
+        # Non-decreasing knots repeat a value more than p + 1 times iff some
+        # knots[i] == knots[i + p + 1].
+        bad = bad | jnp.any(knots[degree + 1 :] == knots[: -degree - 1])
         bad = bad | ~(knots[degree] < knots[n_control])
         return eqx.error_if(
-            knots, bad, f"{name} must be finite, non-decreasing, with a non-empty domain"
+            knots,
+            bad,
+            f"{name} must be finite, non-decreasing, repeat a value at most degree + 1 times, "
+            "with a non-empty domain",
         )
     check_finite(knots, name)
     steps = np.diff(values)
@@ -109,28 +121,67 @@ def check_knots(knots, n_control, degree, name="knots"):
     return knots
 
 
-def check_control_count(n_control, degree, name="control points"):
-    if n_control < degree + 1:
+def check_control_count(count, degree, name="control points", at_most=None, source="points"):
+    """A degree-`p` B-spline has at least `p + 1` control points, and a fit no more than
+    `at_most`, the number of its data `source`; `name` says what is counted."""
+    if count < degree + 1:
         raise ValueError(
-            f"degree {degree} needs at least degree + 1 = {degree + 1} {name}, got {n_control}"
+            f"expected at least p + 1 = {degree + 1} {name} for degree {degree}, got {count}"
         )
+    if at_most is not None and count > at_most:
+        raise ValueError(f"expected at most {at_most} {name} (the number of {source}), got {count}")
 
 
 def check_parameter(u, lower, upper, name="u"):
-    """Raise for concrete parameters outside `[lower, upper]`; traced ones pass."""
+    """Raise for concrete parameters outside `[lower, upper]`, naming the first one and
+    the domain; traced ones pass."""
     values, lo, hi = concrete(u), concrete(lower), concrete(upper)
     if values is None or lo is None or hi is None or values.size == 0:
         return
     if not np.all(np.isfinite(values)):
         raise ValueError(f"{name} must be finite")
-    if values.min() < lo or values.max() > hi:
+    outside = (values < lo) | (values > hi)
+    if np.any(outside):
+        where = tuple(int(i) for i in np.argwhere(outside)[0])
+        at = f" at index {where}" if where else ""
+        raise ValueError(f"{name} must lie in the domain [{lo}, {hi}], got {values[where]}{at}")
+
+
+def check_basis_arguments(knots, degree, u):
+    """For the basis functions: concrete knots form a knot vector with at least `2 p + 2`
+    knots (`check_knots`), and concrete parameters lie in its domain `[knots[p],
+    knots[-p - 1]]`.
+
+    Traced values are not checked and nothing is added to a compiled program: the
+    basis functions sit in the inner loops of evaluation.
+    """
+    values = concrete(knots)
+    if values is None:
+        return
+    check_rank(values, 1, "knots", "(a knot vector)")
+    if values.shape[0] < 2 * degree + 2:
         raise ValueError(
-            f"{name} must lie in the domain [{lo}, {hi}], got values in "
-            f"[{values.min()}, {values.max()}]"
+            f"expected at least 2 (p + 1) = {2 * degree + 2} knots for degree {degree}, "
+            f"got {values.shape[0]}"
         )
+    check_knots(values, values.shape[0] - degree - 1, degree)
+    check_parameter(u, values[degree], values[-degree - 1])
 
 
 def check_order(order):
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 0:
         raise ValueError(f"derivative order must be an int >= 0, got {order!r}")
     return int(order)
+
+
+def check_pair(value, name):
+    """A `(u direction, v direction)` pair of anything, as a tuple."""
+    if not isinstance(value, (tuple, list)) or len(value) != 2:
+        raise ValueError(f"{name} must be a pair (u direction, v direction), got {value!r}")
+    return tuple(value)
+
+
+def check_degree_pair(degree, name="degree"):
+    """The degrees `(p, q)` of a surface, each a Python int >= 1."""
+    p, q = check_pair(degree, name)
+    return check_degree(p, name=f"{name} p"), check_degree(q, name=f"{name} q")

@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from ._halfedge import merge_labels
-from ._surface import NURBSSurface
+from ._sampling import even_grid, import_pyvista
+from ._surface import AbstractSurface, NURBSSurface
 
 _MESH_SUFFIXES = (".stl", ".obj", ".vtk", ".vtp", ".ply")
 
@@ -131,30 +132,25 @@ def tessellate(surfaces, samples=(24, 24)):
 
     **Arguments:**
 
-    - `surfaces`: a `NURBSSurface` of dimension <= 3 or a list of them (e.g. the patches
-      of an object).
+    - `surfaces`: a surface (`NURBSSurface`, `CoonsPatch`, `KinematicSweep`) of
+      dimension <= 3 or a list of them (e.g. the patches of an object).
     - `samples`: grid points per patch along `u` and `v`.
 
     **Returns:**
 
     The welded triangle mesh.
     """
-    from . import viz  # pyvista is imported on first use
-
-    surfaces = [surfaces] if isinstance(surfaces, NURBSSurface) else list(surfaces)
+    surfaces = [surfaces] if isinstance(surfaces, AbstractSurface) else list(surfaces)
     if not surfaces:
         raise ValueError("tessellate needs at least one surface")
     cell_triangles = _grid_triangles(*samples)
     points, triangles = [], []
     for surface in surfaces:
-        (u0, u1), (v0, v1) = surface.domain
-        us = np.linspace(float(u0), float(u1), samples[0])
-        vs = np.linspace(float(v0), float(v1), samples[1])
         triangles.append(cell_triangles + sum(len(p) for p in points))
-        points.append(viz._lift_to_3d(surface.grid(us, vs)).reshape(-1, 3))
+        points.append(even_grid(surface, samples)[2].reshape(-1, 3))
     points, triangles = _weld(np.concatenate(points), np.concatenate(triangles), 1e-9)
     faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).ravel()
-    return viz._pyvista().PolyData(points, faces)
+    return import_pyvista().PolyData(points, faces)
 
 
 def export_mesh(path, surfaces, samples=(24, 24)) -> None:
@@ -163,7 +159,7 @@ def export_mesh(path, surfaces, samples=(24, 24)) -> None:
     **Arguments:**
 
     - `path`: the file to write; its suffix picks the format.
-    - `surfaces`: a `NURBSSurface` or a list of them.
+    - `surfaces`: a surface or a list of them.
     - `samples`: grid points per patch along `u` and `v`.
     """
     suffix = Path(path).suffix.lower()

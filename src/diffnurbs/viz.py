@@ -4,21 +4,7 @@ import os
 
 import numpy as np
 
-
-def _pyvista():
-    try:
-        import pyvista
-    except ImportError as error:  # the optional "viz" extra
-        raise ImportError("diffnurbs.viz needs pyvista: pip install 'diffnurbs[viz]'") from error
-    return pyvista
-
-
-def _lift_to_3d(points):
-    points = np.asarray(points, dtype=float)
-    if points.shape[-1] > 3:
-        raise ValueError(f"pyvista draws points of dimension <= 3, got {points.shape[-1]}")
-    pad = [(0, 0)] * (points.ndim - 1) + [(0, 3 - points.shape[-1])]
-    return np.pad(points, pad)
+from ._sampling import even_grid, import_pyvista, lift_to_3d
 
 
 def surface_mesh(surface, samples=(60, 60)):
@@ -26,18 +12,16 @@ def surface_mesh(surface, samples=(60, 60)):
 
     **Arguments:**
 
-    - `surface`: a `NURBSSurface` of dimension <= 3.
+    - `surface`: any surface (`NURBSSurface`, `CoonsPatch`, `KinematicSweep`) of
+      dimension <= 3.
     - `samples`: `(count along u, count along v)`.
 
     **Returns:**
 
     The grid, with point data `"u"` and `"v"` holding the parameters.
     """
-    pv = _pyvista()
-    (u0, u1), (v0, v1) = surface.domain
-    us = np.linspace(float(u0), float(u1), samples[0])
-    vs = np.linspace(float(v0), float(v1), samples[1])
-    points = _lift_to_3d(surface.grid(us, vs))
+    pv = import_pyvista()
+    us, vs, points = even_grid(surface, samples)
     grid = pv.StructuredGrid(points[..., 0], points[..., 1], points[..., 2])
     # StructuredGrid stores points in Fortran order over (u, v).
     grid["u"] = np.repeat(us[:, None], len(vs), axis=1).ravel(order="F")
@@ -56,8 +40,8 @@ def control_net_mesh(control_points):
 
     A `pyvista.PolyData` of line segments through the control points.
     """
-    pv = _pyvista()
-    points = _lift_to_3d(control_points)
+    pv = import_pyvista()
+    points = lift_to_3d(control_points)
     if points.ndim == 2:
         return pv.lines_from_points(points)
     index = np.arange(points.shape[0] * points.shape[1]).reshape(points.shape[:2])
@@ -70,9 +54,9 @@ def control_net_mesh(control_points):
 
 def curve_polyline(curve, samples=200):
     """A `pyvista.PolyData` polyline through `samples` points of the curve."""
-    pv = _pyvista()
+    pv = import_pyvista()
     lower, upper = curve.domain
-    points = _lift_to_3d(curve(np.linspace(float(lower), float(upper), samples)))
+    points = lift_to_3d(curve(np.linspace(float(lower), float(upper), samples)))
     return pv.lines_from_points(points)
 
 
@@ -89,7 +73,7 @@ def use_notebook_backend():
     """
     # VTK picks its render window when the first one is made: set it before any render.
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    pv = _pyvista()
+    pv = import_pyvista()
     headless = os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true"
     backend = "static" if headless else "html"
     pv.set_jupyter_backend(backend)

@@ -1,0 +1,65 @@
+"""The diffnurbs course's machinery, beside the library: notebooks, exercises, grading.
+
+Runs the course's notebooks headless, generates the student exercises from the otter-grader
+masters and checks them (authoring rules, drift, hidden-test leaks), and grades submissions:
+`diffnurbs-grade` (`main`). Needs the `course` extra (`pip install "diffnurbs[course]"`);
+`import diffnurbs` never imports it. Every folder is an argument: `CourseLayout(root)` names
+the folders of a course repository, `find_solutions` the default masters of the grader.
+The conventions are written down for chapter authors in `course/AUTHORING.md`.
+"""
+
+from ._batch import find_submissions as find_submissions, grade_directory as grade_directory
+from ._cli import main as main
+from ._exercises import (
+    exercise_drift as exercise_drift,
+    generate_exercise as generate_exercise,
+    hidden_test_leaks as hidden_test_leaks,
+    normalize_exercise as normalize_exercise,
+    notebook_sources as notebook_sources,
+)
+from ._grading import (
+    CHECK_TIMEOUT as CHECK_TIMEOUT,
+    DEFAULT_TIMEOUT as DEFAULT_TIMEOUT,
+    INIT_TIMEOUT as INIT_TIMEOUT,
+    RECOVERY_TIMEOUT as RECOVERY_TIMEOUT,
+    GradeResult as GradeResult,
+    grade_notebook as grade_notebook,
+)
+from ._layout import CourseLayout as CourseLayout, find_solutions as find_solutions
+from ._masters import (
+    Master as Master,
+    load_master as load_master,
+    load_masters as load_masters,
+    match_master as match_master,
+)
+from ._notebooks import (
+    HEADLESS_ENV as HEADLESS_ENV,
+    KERNEL_NAME as KERNEL_NAME,
+    KERNELSPEC as KERNELSPEC,
+    CellError as CellError,
+    PollingNotebookClient as PollingNotebookClient,
+    cell_errors as cell_errors,
+    clean_notebook as clean_notebook,
+    count_figures as count_figures,
+    execute_notebook as execute_notebook,
+    make_client as make_client,
+    notebooks as notebooks,
+    policy_problems as policy_problems,
+    read_notebook as read_notebook,
+    use_headless_defaults as use_headless_defaults,
+)
+from ._otter import (
+    ANSWER_TAG as ANSWER_TAG,
+    ASSIGNMENT_CONFIG as ASSIGNMENT_CONFIG,
+    Assigned as Assigned,
+    assign as assign,
+    assignment_config_text as assignment_config_text,
+    hidden_cases as hidden_cases,
+    otter_tests as otter_tests,
+)
+from ._policy import (
+    master_problems as master_problems,
+    problems_in_test_code as problems_in_test_code,
+)
+from ._scores import question_columns as question_columns, write_csv as write_csv
+from ._session import KernelSession as KernelSession

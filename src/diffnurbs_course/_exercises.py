@@ -1,0 +1,145 @@
+"""Student notebooks: generated from the masters, in sync with them, free of hidden tests."""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import tempfile
+from pathlib import Path
+
+import nbformat
+
+from ._notebooks import clean_notebook, notebooks, read_notebook
+from ._otter import SOLUTION_MARKER, assign, hidden_cases
+
+
+def _cell_id(cell: nbformat.NotebookNode, seen: dict[str, int]) -> str:
+    digest = hashlib.sha1((cell.cell_type + "\n" + cell.source).encode()).hexdigest()[:12]
+    seen[digest] = seen.get(digest, 0) + 1
+    return digest if seen[digest] == 1 else f"{digest}-{seen[digest]}"
+
+
+def normalize_exercise(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
+    """Give a generated student notebook content-derived cell ids, so regeneration is byte-stable.
+
+    **Arguments:**
+
+    - `nb`: otter's student notebook (modified in place).
+
+    **Returns:**
+
+    The same notebook, cleaned like every committed notebook.
+    """
+    seen: dict[str, int] = {}
+    for cell in nb.cells:
+        cell.id = _cell_id(cell, seen)
+    return clean_notebook(nb)
+
+
+def generate_exercise(master: Path, exercise: Path, build: Path) -> nbformat.NotebookNode:
+    """Generate the student version of a master and write it.
+
+    **Arguments:**
+
+    - `master`: `solutions/NN_topic.ipynb`.
+    - `exercise`: where to write the student notebook, e.g. `exercises/NN_topic.ipynb`.
+    - `build`: folder for otter's output (the autograder with hidden tests stays there).
+
+    **Returns:**
+
+    The student notebook written.
+    """
+    assigned = assign(master, build)
+    nb = normalize_exercise(read_notebook(assigned.student))
+    exercise.parent.mkdir(parents=True, exist_ok=True)
+    nbformat.write(nb, exercise)
+    return nb
+
+
+def notebook_sources(nb: nbformat.NotebookNode) -> list[tuple[str, str]]:
+    """`(cell_type, source)` of every cell: what exercise sync compares (ids are otter's noise)."""
+    return [(cell.cell_type, cell.source) for cell in nb.cells]
+
+
+def _first_difference(actual: list[tuple[str, str]], expected: list[tuple[str, str]]) -> str:
+    for index, (a, e) in enumerate(zip(actual, expected, strict=False)):
+        if a != e:
+            return f"cell {index} differs: {a[1][:80]!r} != expected {e[1][:80]!r}"
+    return f"{len(actual)} cells, expected {len(expected)}"
+
+
+def exercise_drift(master: Path, exercise: Path) -> list[str]:
+    """How a committed exercise differs from what its master generates now.
+
+    Compares cell types and sources and the otter metadata (public tests, assignment name);
+    cell ids are ignored.
+
+    **Arguments:**
+
+    - `master`: `solutions/NN_topic.ipynb`.
+    - `exercise`: the committed `exercises/NN_topic.ipynb`.
+
+    **Returns:**
+
+    Human-readable differences (empty when in sync).
+    """
+    if not exercise.exists():
+        return [f"{exercise} is missing"]
+    with tempfile.TemporaryDirectory(prefix="diffnurbs-sync-") as tmp:
+        expected = generate_exercise(master, Path(tmp) / master.name, Path(tmp) / "build")
+    actual = read_notebook(exercise)
+    drift = []
+    if notebook_sources(actual) != notebook_sources(expected):
+        drift.append(_first_difference(notebook_sources(actual), notebook_sources(expected)))
+    if actual.metadata.get("otter") != expected.metadata.get("otter"):
+        drift.append("the otter metadata (public tests or assignment name) differs")
+    return drift
+
+
+def _key_lines(code: str) -> set[str]:
+    lines = set()
+    for line in code.splitlines():
+        line = re.sub(r"^(>>>|\.\.\.) ?", "", line.strip()).strip()
+        if line and not line.startswith(("#", "import ", "from ")):
+            lines.add(line)
+    return lines
+
+
+def _notebook_leaks(path: Path, hidden: list[set[str]]) -> list[str]:
+    nb = read_notebook(path)
+    leaks = [f"{path}: hidden test in the notebook metadata" for _ in hidden_cases(nb)]
+    for index, cell in enumerate(nb.cells):
+        lines = {line.strip() for line in cell.source.splitlines()}
+        if any(key and key <= lines for key in hidden):
+            leaks.append(f"{path}: cell {index} contains a hidden test")
+        if "# HIDDEN" in cell.source or SOLUTION_MARKER.search(cell.source):
+            leaks.append(f"{path}: cell {index} contains a `# HIDDEN` or solution marker")
+    return leaks
+
+
+def hidden_test_leaks(exercises: Path, solutions: Path) -> list[str]:
+    """Look for hidden tests (and anything that is not a student notebook) under `exercises`.
+
+    **Arguments:**
+
+    - `exercises`: the folder of student notebooks.
+    - `solutions`: the folder of masters whose hidden tests must not appear there.
+
+    **Returns:**
+
+    Human-readable leaks (empty when there are none).
+    """
+    hidden: list[set[str]] = []
+    with tempfile.TemporaryDirectory(prefix="diffnurbs-hidden-") as tmp:
+        for master in notebooks(solutions):
+            autograder = read_notebook(assign(master, Path(tmp) / master.stem).autograder)
+            hidden += [_key_lines(code) for code in hidden_cases(autograder)]
+    leaks = []
+    for path in sorted(p for p in exercises.rglob("*") if p.is_file()):
+        if any(part.startswith(".") for part in path.relative_to(exercises).parts):
+            continue  # .OTTER_LOG, .ipynb_checkpoints/: the student's local state, git-ignored
+        if path.suffix != ".ipynb" or path.parent != exercises:
+            leaks.append(f"{path}: only student notebooks belong under {exercises}")
+        else:
+            leaks += _notebook_leaks(path, hidden)
+    return leaks

@@ -167,23 +167,34 @@ BASIS_CALLS = {
 
 
 @pytest.mark.parametrize("name", BASIS_CALLS)
-def test_basis_functions_reject_bad_concrete_input(name):
+def test_basis_functions_reject_bad_concrete_knots(name):
     # basis_matrix returned rows with negative entries, not summing to one, for these.
     call = BASIS_CALLS[name]
     u = np.array([0.1, 0.6])
     decreasing = r"non-decreasing, got knots\[4\] = 0.3 < knots\[3\] = 0.5"
     with pytest.raises(ValueError, match=decreasing):
         call([0, 0, 0, 0.5, 0.3, 1, 1, 1.0], 2, u)
-    with pytest.raises(ValueError, match=r"u must lie in the domain \[0.0, 1.0\], got 1.5"):
-        call([0, 0, 0, 0.5, 1, 1, 1.0], 2, np.array([0.2, 1.5]))
-    with pytest.raises(ValueError, match=r"domain \[2.0, 3.0\], got 1.0"):
-        call(np.arange(6.0), 2, np.array([1.0]))  # unclamped: the domain is [knots[p], knots[-p-1]]
     with pytest.raises(ValueError, match=r"at least 2 \(p \+ 1\) = 6 knots for degree 2, got 5"):
         call([0, 0, 0.5, 1, 1.0], 2, u)
     with pytest.raises(ValueError, match="at most degree \\+ 1 = 3 times"):
         call([0, 0, 0, 0.5, 0.5, 0.5, 0.5, 1, 1, 1.0], 2, u)
+
+
+@pytest.mark.parametrize("name", ["basis_funs", "ders_basis_funs", "basis_matrix"])
+def test_basis_functions_reject_concrete_parameters_outside_the_domain(name):
+    # Outside the domain the values are those of the end spans' polynomials, not basis
+    # functions (negative entries).
+    call = BASIS_CALLS[name]
+    with pytest.raises(ValueError, match=r"u must lie in the domain \[0.0, 1.0\], got 1.5"):
+        call([0, 0, 0, 0.5, 1, 1, 1.0], 2, np.array([0.2, 1.5]))
+    with pytest.raises(ValueError, match=r"domain \[2.0, 3.0\], got 1.0"):
+        call(np.arange(6.0), 2, np.array([1.0]))  # unclamped: the domain is [knots[p], knots[-p-1]]
     with pytest.raises(ValueError, match="u must be finite"):
         call([0, 0, 0, 0.5, 1, 1, 1.0], 2, np.array([np.nan]))
+
+
+def test_find_span_outside_the_domain_is_the_first_or_last_span():
+    np.testing.assert_array_equal(dn.find_span([0, 0, 0, 0.25, 1, 1, 1.0], 2, [-0.1, 1.1]), [2, 3])
 
 
 def test_basis_matrix_outside_the_domain_under_jit():

@@ -1,5 +1,7 @@
 """Every kind of bad input gets a ValueError that names the problem and what was expected."""
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -42,6 +44,16 @@ def test_bad_curve_input(kwargs, message):
 def test_empty_domain():
     with pytest.raises(ValueError, match="at most degree"):
         dn.NURBSCurve(POINTS, 1, [0, 0.5, 0.5, 0.5, 0.5, 1])
+
+
+def test_traced_knots_are_checked_when_the_program_runs():
+    knots_of = jax.jit(lambda knots: dn.NURBSCurve(POINTS, 1, knots).knots)
+    knots_of(jnp.asarray([0, 0, 0.5, 0.7, 1, 1.0]))
+    # A value more than p + 1 times: the traced branch checks the multiplicity too.
+    with pytest.raises(Exception, match="repeat a value at most degree \\+ 1 times"):
+        knots_of(jnp.asarray([0, 0, 0.5, 0.5, 0.5, 1.0])).block_until_ready()
+    with pytest.raises(Exception, match="non-decreasing"):
+        knots_of(jnp.asarray([0, 0, 0.7, 0.5, 1, 1.0])).block_until_ready()
 
 
 def test_bad_derivative_orders_and_parameters():
@@ -93,7 +105,7 @@ def test_bad_surface_calls():
 
 
 def test_de_casteljau_bad_input():
-    with pytest.raises(ValueError, match=r"2 dimensions \(n \+ 1, dim\)"):
+    with pytest.raises(ValueError, match=r"2 dimensions \(n_control, dim\)"):
         dn.de_casteljau(np.zeros(3), 0.5)
     with pytest.raises(ValueError, match="finite and positive"):
         dn.de_casteljau(np.zeros((3, 2)), 0.5, weights=[1, 0, 1])

@@ -4,9 +4,9 @@ The degree is always a Python int, so the loops below unroll at trace time and e
 function is a fixed expression graph of array operations: `jit`, `vmap` and `grad`
 (with respect to the knots as well as the parameter) work on all of them.
 
-`find_span`, `basis_funs`, `ders_basis_funs` and `basis_matrix` check concrete knots and
-parameters (`check_basis_arguments`) before calling their compiled bodies; traced ones
-pass unchecked, so the checks cost nothing inside `jit`.
+`find_span`, `basis_funs`, `ders_basis_funs` and `basis_matrix` check concrete knots (and
+all but `find_span` concrete parameters) with `check_basis_arguments` before calling their
+compiled bodies; traced ones pass unchecked, so the checks cost nothing inside `jit`.
 """
 
 import functools
@@ -24,14 +24,14 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
     """Index `i` of the knot span `[knots[i], knots[i + 1])` that holds `u`.
 
     The largest `i` in `[degree, n]` with `knots[i] <= u`, where `n = len(knots) - degree - 2`:
-    the last knot belongs to the last non-empty span, and a repeated knot starts the span
-    to its right. The search is a binary search written as a loop (a bisection per bit of
-    the index), which XLA keeps as one pass over `u`.
+    the last knot belongs to the last non-empty span, a repeated knot starts the span to
+    its right, and parameters outside the domain fall into the first or last span. The
+    search is a binary search written as a loop (a bisection per bit of the index), which
+    XLA keeps as one pass over `u`.
 
-    Concrete knots and parameters are checked (`ValueError`): a knot vector of at least
-    `2 p + 2` non-decreasing knots, `u` in the domain `[knots[p], knots[n + 1]]`. Traced
-    ones are not, at no cost to the compiled program; there a parameter outside the
-    domain falls into the first or last span.
+    Concrete knots are checked (`ValueError`): at least `2 p + 2` of them, finite,
+    non-decreasing, no value more than `p + 1` times, a non-empty domain. Traced knots
+    are not, at no cost to the compiled program.
 
     **Arguments:**
 
@@ -44,7 +44,7 @@ def find_span(knots: ArrayLike, degree: int, u: ArrayLike) -> Int[Array, "..."]:
     Integer array of the shape of `u`.
     """
     check_degree(degree, minimum=0)
-    check_basis_arguments(knots, degree, u)
+    check_basis_arguments(knots, degree)
     return _find_span(knots, degree, u)
 
 
@@ -77,8 +77,10 @@ def basis_funs(
 ) -> tuple[Int[Array, "..."], Float[Array, "... p+1"]]:
     """The `degree + 1` non-zero B-spline basis functions at `u` (NURBS Book A2.2).
 
-    Concrete inputs are checked as in `find_span`; traced ones are not, and a traced
-    parameter outside the domain gets the polynomial piece of the first or last span.
+    Concrete knots are checked as in `find_span`, and concrete parameters must lie in the
+    domain `[knots[p], knots[n + 1]]` (`ValueError`); traced ones are not checked, and a
+    traced parameter outside the domain gets the polynomial piece of the first or last
+    span.
 
     **Arguments:**
 
@@ -148,11 +150,11 @@ def basis_matrix(knots: ArrayLike, degree: int, u: ArrayLike) -> Float[Array, "m
 
     Interpolation and least squares solve with it; a curve's points are `A @ P`.
 
-    Concrete inputs are checked (`ValueError`, as in `find_span`): at least `2 p + 2`
+    Concrete inputs are checked (`ValueError`, as in `basis_funs`): at least `2 p + 2`
     finite, non-decreasing knots, no value repeated more than `p + 1` times, a non-empty
     domain, and every `u` in the domain `[knots[p], knots[n + 1]]`. Traced inputs (inside
     `jit` or `grad`) are not checked; there a parameter outside the domain gets the
-    polynomial pieces of the first or last span (`basis_funs`).
+    polynomial pieces of the first or last span.
 
     **Arguments:**
 
@@ -218,7 +220,7 @@ def ders_basis_funs(
     """Non-zero basis functions and their derivatives up to `order` (NURBS Book A2.3).
 
     Derivatives of order above the degree are exactly zero. Concrete inputs are checked
-    as in `find_span`; traced ones are not, and a traced parameter outside the domain
+    as in `basis_funs`; traced ones are not, and a traced parameter outside the domain
     gets the polynomial piece of the first or last span.
 
     **Arguments:**

@@ -147,10 +147,10 @@ def check_parameter(u, lower, upper, name="u"):
         raise ValueError(f"{name} must lie in the domain [{lo}, {hi}], got {values[where]}{at}")
 
 
-def check_basis_arguments(knots, degree, u):
+def check_basis_arguments(knots, degree, u=None):
     """For the basis functions: concrete knots form a knot vector with at least `2 p + 2`
-    knots (`check_knots`), and concrete parameters lie in its domain `[knots[p],
-    knots[-p - 1]]`.
+    knots (`check_knots`), and concrete parameters `u`, where given, lie in its domain
+    `[knots[p], knots[-p - 1]]`.
 
     Traced values are not checked and nothing is added to a compiled program: the
     basis functions sit in the inner loops of evaluation.
@@ -165,7 +165,8 @@ def check_basis_arguments(knots, degree, u):
             f"got {values.shape[0]}"
         )
     check_knots(values, values.shape[0] - degree - 1, degree)
-    check_parameter(u, values[degree], values[-degree - 1])
+    if u is not None:
+        check_parameter(u, values[degree], values[-degree - 1])
 
 
 def check_order(order):

@@ -87,6 +87,25 @@ def test_library_imports_from_the_wheel_without_course_dependencies(installed, t
     assert Path(result.stdout.strip()).is_relative_to(installed.site / "diffnurbs_course")
 
 
+def test_submodules_are_attributes_loaded_on_first_use(installed, tmp_path):
+    code = (
+        "import sys, diffnurbs as dn\n"
+        "heavy = {'pyvista', 'matplotlib.pyplot'}\n"
+        "assert not heavy & set(sys.modules), heavy & set(sys.modules)\n"
+        "assert {'io', 'ph', 'plot', 'viz'} <= set(dir(dn))\n"
+        "assert callable(dn.io.read_bpt) and callable(dn.ph.arc_length)\n"
+        "assert callable(dn.plot.plot_curve) and callable(dn.viz.surface_mesh)\n"
+        "assert 'pyvista' not in sys.modules  # viz imports pyvista only when it draws\n"
+        "try:\n"
+        "    dn.no_such_module\n"
+        "except AttributeError as error:\n"
+        "    print(error)\n"
+    )
+    result = installed.run("python", "-c", code, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert "has no attribute 'no_such_module'" in result.stdout
+
+
 def test_installed_grader_scores_the_demo(installed, tmp_path):
     submissions = tmp_path / "submissions"
     (submissions / "master").mkdir(parents=True)

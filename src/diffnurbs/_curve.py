@@ -1,6 +1,7 @@
 """NURBS curves: evaluation, derivatives and differential geometry."""
 
 import math
+import typing
 
 import equinox as eqx
 import jax.numpy as jnp
@@ -31,6 +32,7 @@ from ._validate import (
 _TABLE_POINTS_PER_SPAN = 32
 
 
+@typing.final
 class NURBSCurve(AbstractRationalSpline):
     """A (rational) B-spline curve `C(u) = sum_i N_{i,p}(u) w_i P_i / sum_i N_{i,p}(u) w_i`.
 

@@ -61,5 +61,13 @@ from ._policy import (
     master_problems as master_problems,
     problems_in_test_code as problems_in_test_code,
 )
+from ._report import (
+    CHECK_TAG as CHECK_TAG,
+    LIMITS as LIMITS,
+    ChapterMetrics as ChapterMetrics,
+    chapter_metrics as chapter_metrics,
+    course_report as course_report,
+    heading_anchors as heading_anchors,
+)
 from ._scores import question_columns as question_columns, write_csv as write_csv
 from ._session import KernelSession as KernelSession

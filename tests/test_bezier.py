@@ -86,7 +86,7 @@ def test_subdivision_rejects_bad_input():
     points = np.zeros((4, 2))
     with pytest.raises(ValueError, match=r"domain \[0.0, 1.0\]"):
         dn.subdivide(points, 1.5)
-    with pytest.raises(ValueError, match=r"\(n \+ 1, dim\)"):
+    with pytest.raises(ValueError, match=r"\(n_control, dim\)"):
         dn.subdivide(np.zeros(4), 0.5)
     with pytest.raises(ValueError, match="positive"):
         dn.subdivide(points, 0.5, weights=[1, -1, 1, 1])

@@ -298,13 +298,13 @@ def test_float32_curves_stay_float32():
         (lambda: catmull_rom(np.array([[0.0, np.nan], [1.0, 1.0]])), "must be finite"),
         (lambda: hermite_segment(POINTS[:2], POINTS[1], POINTS[2], POINTS[3]), "p0 must have 1"),
         (lambda: hermite_segment(POINTS[0], POINTS[1, :2], POINTS[2], POINTS[3]), "p1 must have"),
-        (lambda: matrix_segment(POINTS[:4], "hermit", 0.5), "basis must be one of"),
+        (lambda: matrix_segment(POINTS[:4], "hermit", 0.5), "kind must be one of"),
         (lambda: matrix_segment(POINTS[:4], 3, 0.5), r"shape \(4, 4\), got \(\)"),
         (lambda: matrix_segment(POINTS[:4], np.eye(3), 0.5), r"shape \(4, 4\), got \(3, 3\)"),
         (lambda: matrix_segment(POINTS[:3], "bezier", 0.5), r"shape \(4, dim\), got \(3, 3\)"),
         (lambda: matrix_segment(POINTS[0], "bezier", 0.5), "geometry must have 2 dimensions"),
         (lambda: matrix_segment(POINTS[:4], "bezier", 1.5), r"t must lie in the domain"),
-        (lambda: cubic_matrix(None), "basis must be one of"),
+        (lambda: cubic_matrix(None), "kind must be one of"),
     ],
 )
 def test_value_errors(call, match):

@@ -1,5 +1,7 @@
 """Random splines with repeated interior knots, and naive oracles, shared by the tests."""
 
+import functools
+
 import jax
 import numpy as np
 
@@ -44,16 +46,25 @@ def sample_parameters(rng, knots, degree, count=40):
     return np.concatenate([np.unique(inside), rng.uniform(lower, upper, size=count)])
 
 
-# Compiled once per (degree, i): the eager recursion would dispatch 2^p tiny operations.
-_cox_de_boor = jax.jit(dn.cox_de_boor, static_argnums=(1, 2))
+@functools.partial(jax.jit, static_argnums=1)
+def _cox_de_boor_all(shifted, degree, u):
+    """`cox_de_boor(shifted[i], degree, 0, u)` for every row `i`, stacked on the last axis."""
+    return jax.vmap(lambda knots: dn.cox_de_boor(knots, degree, 0, u), out_axes=-1)(shifted)
 
 
 def naive_basis(knots, degree, u):
-    """All `N_{i,p}(u)` by the Cox-de Boor recursion, shape `u.shape + (n + 1,)`."""
+    """All `N_{i,p}(u)` by the Cox-de Boor recursion, shape `u.shape + (n + 1,)`.
+
+    `N_{i,p}` on `knots` is `N_{0,p}` on `knots[i:]` padded back to full length with copies
+    of the last knot: the recursion reads `knots[i:]` only (the degree-0 end test compares
+    a tail with its first knot, and the copies of the last knot change no such test). So
+    every function is one row of a batch, and the recursion, unrolled into `2^p` terms,
+    compiles once per degree and shape instead of once per index `i`.
+    """
+    knots = np.asarray(knots, float)
     count = len(knots) - degree - 1
-    return np.stack(
-        [np.asarray(_cox_de_boor(np.asarray(knots, float), degree, i, u)) for i in range(count)], -1
-    )
+    shifted = np.stack([np.r_[knots[i:], np.full(i, knots[-1])] for i in range(count)])
+    return np.asarray(_cox_de_boor_all(shifted, degree, u))
 
 
 def naive_curve(curve, u):
@@ -80,3 +91,21 @@ def nine_point_circle(radius=1.0, center=(0.0, 0.0)):
     weights = np.where(np.arange(9) % 2 == 0, 1.0, np.sqrt(2) / 2)
     knots = [0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1]
     return dn.NURBSCurve(points, 2, knots, weights)
+
+
+def partial_derivative(function, argnum=0):
+    """`d function / d args[argnum]` at a scalar argument, by forward-mode autodiff.
+
+    `jax.jvp` with a unit tangent: what `jax.jacfwd` gives at a scalar argument, without
+    its batching over a one-element basis, so nested derivatives compile to about half
+    the program.
+    """
+
+    def derivative(*args):
+        def along(x):
+            return function(*args[:argnum], x, *args[argnum + 1 :])
+
+        x = args[argnum]
+        return jax.jvp(along, (x,), (jax.numpy.ones_like(x),))[1]
+
+    return derivative

@@ -4,7 +4,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import naive_curve, nine_point_circle, random_curve, sample_parameters
+from helpers import (
+    naive_curve,
+    nine_point_circle,
+    partial_derivative,
+    random_curve,
+    sample_parameters,
+)
 
 import diffnurbs as dn
 
@@ -39,9 +45,9 @@ def test_bezier_through_de_casteljau_equals_curve():
     )
 
 
-def nested_jacfwd(function, order):
+def nested_derivative(function, order):
     for _ in range(order):
-        function = jax.jacfwd(function)
+        function = partial_derivative(function)
     return function
 
 
@@ -54,7 +60,7 @@ def test_derivatives_match_autodiff(degree, rational):
     order = min(degree + 1, 4)  # above the degree (p <= 3): zero for B-splines, not for NURBS
     analytic = curve.derivatives(u, order)
     for k in range(order + 1):
-        autodiff = jax.jit(jax.vmap(nested_jacfwd(curve, k)))(jnp.asarray(u))
+        autodiff = jax.jit(jax.vmap(nested_derivative(curve, k)))(jnp.asarray(u))
         scale = max(1.0, float(np.abs(autodiff).max()))
         np.testing.assert_allclose(analytic[:, k], autodiff, atol=1e-9 * scale)
     if not rational:

@@ -3,8 +3,8 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-# Headless VTK renders through EGL; pyvista needs these shared libraries at run time.
-SYSTEM_LIBS := libgl1 libegl1
+# System packages, installed with apt where missing: libgl1 and libegl1 for pyvista's headless
+# rendering (EGL), chromium for the browser tests (tests/test_browser.py).
 export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 export PYVISTA_OFF_SCREEN ?= true
 
@@ -19,13 +19,18 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 system-libs:
-	@if ldconfig -p | grep -q 'libEGL.so.1' && ldconfig -p | grep -q 'libGL.so.1'; then :; \
+	@missing=""; \
+	ldconfig -p | grep -q 'libEGL.so.1' || missing="$$missing libegl1"; \
+	ldconfig -p | grep -q 'libGL.so.1' || missing="$$missing libgl1"; \
+	command -v chromium >/dev/null || missing="$$missing chromium"; \
+	if [ -z "$$missing" ]; then :; \
 	elif command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
-		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $(SYSTEM_LIBS); \
-	else echo "warning: install $(SYSTEM_LIBS) (apt) for pyvista's 3D figures"; fi
+		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	else echo "warning: install$$missing (apt): pyvista's 3D figures and the browser tests need them"; fi
 
 lab: install
 	PYVISTA_OFF_SCREEN=false $(BIN)/jupyter lab --ServerApp.root_dir=. \
+		--ServerApp.kernel_websocket_connection_class=diffnurbs_course.lab.NoDelayConnection \
 		$$([ "$$(id -u)" = 0 ] && echo --allow-root) course/00_index.ipynb
 
 test: install

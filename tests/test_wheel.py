@@ -92,7 +92,7 @@ def test_submodules_are_attributes_loaded_on_first_use(installed, tmp_path):
         "import sys, diffnurbs as dn\n"
         "heavy = {'pyvista', 'matplotlib.pyplot'}\n"
         "assert not heavy & set(sys.modules), heavy & set(sys.modules)\n"
-        "assert {'io', 'ph', 'plot', 'viz'} <= set(dir(dn))\n"
+        "assert {'io', 'ph', 'plot', 'viz', 'widgets'} <= set(dir(dn))\n"
         "assert callable(dn.io.read_bpt) and callable(dn.ph.arc_length)\n"
         "assert callable(dn.plot.plot_curve) and callable(dn.viz.surface_mesh)\n"
         "assert 'pyvista' not in sys.modules  # viz imports pyvista only when it draws\n"
@@ -104,6 +104,18 @@ def test_submodules_are_attributes_loaded_on_first_use(installed, tmp_path):
     result = installed.run("python", "-c", code, cwd=tmp_path)
     assert result.returncode == 0, result.stderr
     assert "has no attribute 'no_such_module'" in result.stdout
+
+
+def test_widget_front_end_ships_in_the_wheel(installed, tmp_path):
+    code = (
+        "import diffnurbs as dn, numpy as np\n"
+        "editor = dn.widgets.CurveEditor(dn.NURBSCurve(np.eye(4, 2), 3))\n"
+        "assert 'export default' in editor._esm and '.dn-editor' in editor._css\n"
+        "print(dn.widgets.__file__)\n"
+    )
+    result = installed.run("python", "-c", code, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert Path(result.stdout.strip()).is_relative_to(installed.site / "diffnurbs")
 
 
 def test_installed_grader_scores_the_demo(installed, tmp_path):

@@ -21,8 +21,9 @@ Naming convention, followed by every public function and class:
 - One public name per concept: classes are constructed directly (`CoonsPatch(...)`,
   `KinematicSweep(...)`); functions build what no class names (`circle`, `revolve`).
 
-Submodules `io` (files and meshes), `plot` (matplotlib), `viz` (pyvista) and `ph`
-(Pythagorean-hodograph curves) are attributes of the package, imported on first use.
+Submodules `io` (files and meshes), `plot` (matplotlib), `viz` (pyvista), `ph`
+(Pythagorean-hodograph curves) and `widgets` (Jupyter editors, on anywidget) are attributes
+of the package, imported on first use.
 """
 
 import importlib
@@ -53,6 +54,7 @@ from ._cubic import (
     uniform_cubic_bspline as uniform_cubic_bspline,
 )
 from ._curve import NURBSCurve as NURBSCurve
+from ._deboor import de_boor_levels as de_boor_levels
 from ._ffd import deform_image as deform_image, ffd as ffd, ffd_lattice as ffd_lattice
 from ._fit_curve import CurveFitReport as CurveFitReport, fit_curve as fit_curve
 from ._fit_function import FunctionFitReport as FunctionFitReport, fit_function as fit_function
@@ -85,7 +87,7 @@ from ._surface import AbstractSurface as AbstractSurface, NURBSSurface as NURBSS
 
 __version__ = "0.1.0"
 
-_SUBMODULES = ("io", "ph", "plot", "viz")
+_SUBMODULES = ("io", "ph", "plot", "viz", "widgets")
 
 
 def __getattr__(name):

@@ -22,7 +22,12 @@ from jaxtyping import Array, ArrayLike, Float
 from ._curve import NURBSCurve
 from ._knotops import greville, merged_knots, missing_knots
 from ._misc import clamp_to_domain, safe_norm
-from ._surface import AbstractSurface, NURBSSurface, autodiff_partials
+from ._surface import (
+    AbstractSurface,
+    NURBSSurface,
+    autodiff_partials,
+    autodiff_second_order,
+)
 from ._validate import check_rank, concrete, float_dtype
 
 
@@ -189,6 +194,9 @@ class CoonsPatch(AbstractSurface):
     @eqx.filter_jit
     def _derivatives(self, u: Array, v: Array, order: int) -> Array:
         return autodiff_partials(self._points, u, v, order)
+
+    def _second_order(self, u: Array, v: Array) -> tuple[Array, Array, Array]:
+        return autodiff_second_order(self._points, u, v)
 
     def _sampling(self):
         def along(a, b):  # the knots of two opposite curves on [0, 1], as for a degree-p net

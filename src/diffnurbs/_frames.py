@@ -19,7 +19,7 @@ from jaxtyping import Array, ArrayLike, Float
 
 from ._curve import NURBSCurve
 from ._misc import safe_norm, safe_normalize
-from ._surface import AbstractSurface, autodiff_partials
+from ._surface import AbstractSurface, autodiff_partials, autodiff_second_order
 from ._validate import check_parameter
 
 FRAME_KINDS = ("rmf", "frenet")
@@ -263,6 +263,9 @@ class KinematicSweep(AbstractSurface):
     @eqx.filter_jit
     def _derivatives(self, u: Array, v: Array, order: int) -> Array:
         return autodiff_partials(self._points, u, v, order)
+
+    def _second_order(self, u: Array, v: Array) -> tuple[Array, Array, Array]:
+        return autodiff_second_order(self._points, u, v)
 
     def _sampling(self):
         p, q = self.profile.degree, self.path.degree

@@ -232,20 +232,24 @@ def _newton(model, x, points, lower, upper, done, max_steps):
 
     def step(state):
         i, x, f, gradient, hessian, gauss_newton, damping, done = state
+        # The first pass only evaluates at `x` (zero matrices give a zero step): so the
+        # model is traced once, in this body, not once more for the initial state.
+        fresh = i == 0
         scale = jnp.trace(gauss_newton, axis1=-2, axis2=-1) / x.shape[-1]
         shift = (damping * jnp.maximum(scale, tiny))[:, None, None] * eye
         newton, definite = _newton_step(*_reduce(gradient, hessian + shift, x, lower, upper))
         fallback, usable = _newton_step(*_reduce(gradient, gauss_newton + shift, x, lower, upper))
         trial = jnp.clip(x + jnp.where(definite[:, None], newton, fallback), lower, upper)
         f_t, *derivatives_t = _objective(model, trial, points)
-        accept = (definite | usable) & (f_t <= f) & ~done
-        small = jnp.all(jnp.abs(trial - x) <= tolerance, axis=-1)
+        accept = ((definite | usable) & (f_t <= f) | fresh) & ~done
+        small = jnp.all(jnp.abs(trial - x) <= tolerance, axis=-1) & ~fresh
 
         def pick(new, old):
             return jnp.where(accept.reshape(accept.shape + (1,) * (new.ndim - 1)), new, old)
 
         raised = jnp.maximum(10 * damping, _FIRST_DAMPING)
         damping = jnp.where(accept, damping / 10, jnp.where(done, damping, raised))
+        damping = jnp.where(fresh, 0.0, damping)
         derivatives = (gradient, hessian, gauss_newton)
         kept = [pick(new, old) for new, old in zip(derivatives_t, derivatives, strict=True)]
         # A step too small to matter ends the search even when rejected: the damping
@@ -254,10 +258,12 @@ def _newton(model, x, points, lower, upper, done, max_steps):
         return (i + 1, pick(trial, x), pick(f_t, f), *kept, damping, done | small)
 
     def running(state):
-        return (state[0] < max_steps) & ~jnp.all(state[-1])
+        return (state[0] <= max_steps) & ~jnp.all(state[-1])
 
-    damping = jnp.zeros(x.shape[:1], x.dtype)
-    state = (0, x, *_objective(model, x, points), damping, done)
+    n, d = x.shape
+    zeros = jnp.zeros((n, d, d), x.dtype)
+    state = (0, x, jnp.full(n, jnp.inf, x.dtype), jnp.zeros_like(x), zeros, zeros)
+    state = (*state, jnp.zeros(n, x.dtype), done)
     _, x, f, *_, done = jax.lax.while_loop(running, step, state)
     return x, f, done
 
@@ -342,14 +348,7 @@ def _curve_model(curve, x):
 
 
 def _surface_model(surface, x):
-    ders = surface.derivatives(x[:, 0], x[:, 1], 2)
-    jac = jnp.stack([ders[:, 1, 0], ders[:, 0, 1]], axis=-1)
-    mixed = ders[:, 1, 1]
-    hess = jnp.stack(
-        [jnp.stack([ders[:, 2, 0], mixed], axis=-1), jnp.stack([mixed, ders[:, 0, 2]], axis=-1)],
-        axis=-2,
-    )
-    return ders[:, 0, 0], jac, hess
+    return surface._second_order(x[:, 0], x[:, 1])
 
 
 def _sample_count(samples_per_span, default):

@@ -48,7 +48,10 @@ class AbstractSurface(eqx.Module):
     - `_derivatives(u, v, order)`: the partials `d^(k+l) S / du^k dv^l`, `k, l <= order`
       (`autodiff_partials` derives them from `_points` where no closed form is at hand);
     - `_sampling()`: for each direction, the parameters between which the surface is
-      smooth (knots) and how many samples per such span point inversion starts from.
+      smooth (knots) and how many samples per such span point inversion starts from;
+    - optionally `_second_order(u, v)`: what point inversion needs, `S`, its Jacobian and
+      its Hessian (the default takes them from `_derivatives(u, v, 2)`, whose entries
+      of order 3 and 4 autodiff surfaces would compute for nothing).
 
     So `viz.surface_mesh`, `io.tessellate` and `closest_point` work on every surface.
     """
@@ -78,6 +81,21 @@ class AbstractSurface(eqx.Module):
     @abc.abstractmethod
     def _sampling(self) -> tuple[tuple[Array, int], tuple[Array, int]]:
         """`((breaks_u, samples_u), (breaks_v, samples_v))` for point inversion."""
+
+    def _second_order(self, u: Array, v: Array) -> tuple[Array, Array, Array]:
+        """`(S, J, H)` at parameter arrays of one shape: points `(..., dim)`, the Jacobian
+        `(..., dim, 2)` and the Hessian `(..., dim, 2, 2)` with respect to `(u, v)`."""
+        ders = self._derivatives(u, v, 2)
+        jacobian = jnp.stack([ders[..., 1, 0, :], ders[..., 0, 1, :]], axis=-1)
+        mixed = ders[..., 1, 1, :]
+        hessian = jnp.stack(
+            [
+                jnp.stack([ders[..., 2, 0, :], mixed], axis=-1),
+                jnp.stack([mixed, ders[..., 0, 2, :]], axis=-1),
+            ],
+            axis=-2,
+        )
+        return ders[..., 0, 0, :], jacobian, hessian
 
     def _parameters(self, u, v):
         """Parameters as arrays; concrete ones outside the domain raise `ValueError`."""
@@ -152,6 +170,32 @@ class AbstractSurface(eqx.Module):
         return surface_closest_point(self, point, samples_per_span)
 
 
+def _total_derivatives(points, u: Array, v: Array, total: int) -> list[Array]:
+    """`[S, DS, ..., D^total S]` at one `(u, v)`: `D^m S` has shape `(dim,) + (2,) * m`,
+    its last `m` axes picking `u` (0) or `v` (1) for each differentiation.
+
+    Each order is one more forward-mode pass over the program of the previous ones, which
+    it carries along as auxiliary output: the program doubles per order, instead of
+    repeating the whole nest for every entry `(k, l)` of a table.
+    """
+
+    def differentiated(orders):
+        def extended(x):
+            def highest(x):
+                found = orders(x)
+                return found[-1], found
+
+            derivative, found = jax.jacfwd(highest, has_aux=True)(x)
+            return [*found, derivative]
+
+        return extended
+
+    orders = lambda x: [points(x[0], x[1])]  # noqa: E731
+    for _ in range(total):
+        orders = differentiated(orders)
+    return orders(jnp.stack([u, v]))
+
+
 def autodiff_partials(points, u: Array, v: Array, order: int) -> Array:
     """The partials `d^(k+l) S / du^k dv^l`, `0 <= k, l <= order`, of `points(u, v)` by
     nested forward-mode autodiff: for surfaces with no closed form for their derivatives.
@@ -168,18 +212,23 @@ def autodiff_partials(points, u: Array, v: Array, order: int) -> Array:
     """
 
     def table(u, v):
-        rows, along_u = [], points
-        for _ in range(order + 1):
-            row, along_v = [], along_u
-            for _ in range(order + 1):
-                row.append(along_v(u, v))
-                along_v = jax.jacfwd(along_v, argnums=1)
-            rows.append(jnp.stack(row))
-            along_u = jax.jacfwd(along_u, argnums=0)
-        return jnp.stack(rows)
+        ders = _total_derivatives(points, u, v, 2 * order)
+        entry = lambda k, l: ders[k + l][(Ellipsis,) + (0,) * k + (1,) * l]  # noqa: E731
+        return jnp.stack(
+            [jnp.stack([entry(k, l) for l in range(order + 1)]) for k in range(order + 1)]
+        )
 
     flat = jax.vmap(table)(jnp.ravel(u), jnp.ravel(v))
     return flat.reshape(u.shape + flat.shape[1:])
+
+
+def autodiff_second_order(points, u: Array, v: Array) -> tuple[Array, Array, Array]:
+    """`S`, its Jacobian and its Hessian in `(u, v)` by forward-mode autodiff; see
+    `AbstractSurface._second_order`. Four copies of the program of `points`, where the
+    table of `autodiff_partials(..., order=2)` needs sixteen.
+    """
+    flat = jax.vmap(lambda u, v: _total_derivatives(points, u, v, 2))(jnp.ravel(u), jnp.ravel(v))
+    return tuple(d.reshape(u.shape + d.shape[1:]) for d in flat)
 
 
 @typing.final

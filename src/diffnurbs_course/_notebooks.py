@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import copy
 import os
 import time
 from dataclasses import dataclass
@@ -20,6 +21,18 @@ interpreter (`sys.executable`), so notebooks run in the same virtual environment
 
 KERNELSPEC = {"name": "python3", "display_name": "Python 3 (ipykernel)", "language": "python"}
 """The kernelspec every committed notebook carries (otter assign needs its `language`)."""
+
+
+def language_info() -> dict:
+    """The `language_info` that this environment's kernel reports when a notebook opens.
+
+    Committed with every notebook, so that opening one in JupyterLab (which writes the
+    kernel's report into the metadata) leaves it unmodified.
+    """
+    from ipykernel.ipkernel import IPythonKernel
+
+    return copy.deepcopy(IPythonKernel.language_info)
+
 
 HEADLESS_ENV = {"VTK_DEFAULT_OPENGL_WINDOW": "vtkEGLRenderWindow", "PYVISTA_OFF_SCREEN": "true"}
 """Environment defaults under which pyvista renders static images without a display."""
@@ -202,7 +215,8 @@ def execute_notebook(
 
 
 def clean_notebook(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
-    """Strip outputs, execution counts and editor state, and set the standard kernelspec.
+    """Strip outputs, execution counts and editor state; set the standard kernelspec and
+    this environment's `language_info`.
 
     **Arguments:**
 
@@ -220,7 +234,7 @@ def clean_notebook(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
             cell.metadata.pop(key, None)
     nb.metadata.pop("widgets", None)
     nb.metadata["kernelspec"] = dict(KERNELSPEC)
-    nb.metadata.setdefault("language_info", {"name": "python"})
+    nb.metadata["language_info"] = language_info()
     return nb
 
 
@@ -233,7 +247,8 @@ def policy_problems(nb: nbformat.NotebookNode) -> list[str]:
 
     **Returns:**
 
-    Human-readable problems: outputs, execution counts, widget state, wrong kernelspec.
+    Human-readable problems: outputs, execution counts, widget state, wrong kernelspec or
+    language_info.
     """
     problems = []
     try:
@@ -252,4 +267,7 @@ def policy_problems(nb: nbformat.NotebookNode) -> list[str]:
     spec = nb.metadata.get("kernelspec", {})
     if spec.get("name") != KERNELSPEC["name"] or spec.get("language") != "python":
         problems.append(f"kernelspec should be {KERNELSPEC}, got {spec}")
+    info, expected = nb.metadata.get("language_info", {}), language_info()
+    if info != expected:
+        problems.append(f"language_info should be {expected} (this kernel's), got {info}")
     return problems

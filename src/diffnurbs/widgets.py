@@ -1,0 +1,286 @@
+"""Jupyter widgets for editing curves by direct manipulation (anywidget; imported on first use).
+
+The browser draws and reports edits; the kernel evaluates every curve with the library, so
+what the widget shows is exactly what `editor.curve` computes.
+"""
+
+import io
+import pathlib
+import time
+
+import anywidget
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import traitlets
+
+from ._basis import basis_matrix
+from ._curve import NURBSCurve
+from ._deboor import de_boor_levels
+from ._misc import safe_divide
+
+_STATIC = pathlib.Path(__file__).parent / "_static"
+# Curve points drawn: enough for a smooth curve on screen, few enough to send at every move.
+_SAMPLES = 1200
+# Digits sent to the browser: a thousandth of a pixel on any sensible view.
+_DIGITS = 7
+
+
+def _listed(array) -> list:
+    return np.round(np.asarray(array, dtype=float), _DIGITS).tolist()
+
+
+def _packed(points) -> bytes:
+    """Points as raw little-endian float64 pairs: sent as a binary buffer, not JSON text
+    (the curve and the comb are most of each message)."""
+    return np.ascontiguousarray(points, dtype="<f8").tobytes()
+
+
+def _unpacked(data: bytes) -> np.ndarray:
+    return np.frombuffer(data, dtype="<f8").reshape(-1, 2)
+
+
+def _state_of(curve: NURBSCurve) -> dict:
+    if curve.dim != 2:
+        raise ValueError(f"CurveEditor edits planar curves, got dim = {curve.dim}")
+    weights = None if curve.weights is None else _listed(curve.weights)
+    return {
+        "control_points": _listed(curve.control_points),
+        "weights": weights,
+        "knots": _listed(curve.knots),
+        "degree": curve.degree,
+    }
+
+
+def _curve_of(state: dict) -> NURBSCurve:
+    weights = state.get("weights")
+    return NURBSCurve(
+        np.asarray(state["control_points"], float),
+        int(state["degree"]),
+        np.asarray(state["knots"], float),
+        None if weights is None else np.asarray(weights, float),
+    )
+
+
+def _parameters(curve: NURBSCurve, per_span: int) -> np.ndarray:
+    """Even parameters on every non-empty knot span, the knots themselves included."""
+    breaks = np.unique(np.asarray(curve.knots)[curve.degree : -curve.degree])
+    steps = np.linspace(0.0, 1.0, per_span, endpoint=False)
+    inside = (breaks[:-1, None] + steps * np.diff(breaks)[:, None]).ravel()
+    return np.append(inside, breaks[-1])
+
+
+@eqx.filter_jit
+def _evaluate(curve: NURBSCurve, params, u):
+    """Curve points, curvature-comb tips and de Boor's levels at `u`, in one compiled call
+    (its shapes stay the same while points, weights and knots are dragged)."""
+    ders = curve.derivatives(params, 2)
+    points, d1, d2 = ders[:, 0], ders[:, 1], ders[:, 2]
+    speed = jnp.linalg.norm(d1, axis=1)
+    kappa = safe_divide(d1[:, 0] * d2[:, 1] - d1[:, 1] * d2[:, 0], speed**3)
+    left = safe_divide(jnp.stack([-d1[:, 1], d1[:, 0]], axis=1), speed[:, None])
+    net = curve.control_points
+    size = jnp.max(jnp.max(net, axis=0) - jnp.min(net, axis=0))
+    # The longest tooth is a fifth of the net's size: the comb's shape is what it shows.
+    scale = safe_divide(0.2 * size, jnp.max(jnp.abs(kappa)))
+    # Teeth point away from the centre of curvature, which lies along `kappa * left`.
+    comb = points - scale * kappa[:, None] * left
+    return points, comb, de_boor_levels(curve, u)
+
+
+def _basis_rows(curve: NURBSCurve, u: np.ndarray) -> list:
+    """`[first, values]` per function: the samples where `R_{i,p}` is not zero, in order."""
+    basis = np.asarray(basis_matrix(curve.knots, curve.degree, u))
+    if curve.weights is not None:
+        weighted = basis * np.asarray(curve.weights)
+        basis = weighted / weighted.sum(axis=1, keepdims=True)
+    rows = []
+    for column in basis.T:
+        support = np.flatnonzero(column > 0)
+        first, last = (support[0], support[-1] + 1) if support.size else (0, 0)
+        # One sample either side, so that each bump is drawn down to zero.
+        first, last = max(first - 1, 0), min(last + 1, len(u))
+        rows.append([int(first), _listed(column[first:last])])
+    return rows
+
+
+class CurveEditor(anywidget.AnyWidget):
+    """Edit a planar `NURBSCurve` by hand: drag, add and delete control points, change
+    weights, drag knots, and watch de Boor's construction, the curvature comb and the
+    basis functions follow.
+
+    In the plot: drag a point to move it; double-click on empty space to add a point to
+    the nearest leg of the control polygon (the knots become uniform again); right-click
+    a point to delete it; turn the mouse wheel over a point to scale its weight (or type
+    the weight of the selected point). Under the plot, drag an interior knot along the
+    knot strip, or the triangle that sets the parameter of the construction.
+
+    The edited curve is `editor.curve`, a trait you can `observe`; assigning a new curve to
+    it updates the drawing. Displayed outside a live Jupyter front end (nbconvert, a
+    static site), the widget shows a picture of its state.
+    """
+
+    _esm = _STATIC / "curve_editor.js"
+    _css = _STATIC / "curve_editor.css"
+
+    curve = traitlets.Instance(NURBSCurve)
+    # Synchronised with the browser: what it edits ...
+    state = traitlets.Dict().tag(sync=True)
+    u = traitlets.Float(0.5).tag(sync=True)
+    show = traitlets.Dict().tag(sync=True)
+    request = traitlets.Int(0).tag(sync=True)
+    # ... and what the kernel computes for it to draw.
+    drawing = traitlets.Dict().tag(sync=True)
+
+    def __init__(
+        self,
+        curve: NURBSCurve,
+        *,
+        u: float | None = None,
+        polygon: bool = True,
+        construction: bool = False,
+        comb: bool = False,
+        basis: bool = True,
+        samples_per_span: int | None = None,
+        **kwargs,
+    ):
+        """**Arguments:**
+
+        - `curve`: the planar `NURBSCurve` to start from.
+        - `u`: the parameter of the construction (default: the middle of the domain).
+        - `polygon`, `construction`, `comb`, `basis`: what is drawn at first (each can be
+          switched in the widget).
+        - `samples_per_span`: curve points per knot span; None gives 24, fewer on long
+          curves (about 1200 points in all, at least 4 per span).
+        - `kwargs`: passed to `anywidget.AnyWidget`.
+        """
+        if not isinstance(curve, NURBSCurve):
+            raise ValueError(f"CurveEditor edits a NURBSCurve, got {type(curve).__name__}")
+        if samples_per_span is not None and samples_per_span < 2:
+            raise ValueError(f"samples_per_span must be >= 2, got {samples_per_span}")
+        self._per_span = samples_per_span
+        self._basis_key = self._basis_cache = self._drawn = None
+        self._started = time.perf_counter()
+        self._accepted = _state_of(curve)
+        lower, upper = (float(x) for x in curve.domain)
+        super().__init__(
+            curve=curve,
+            state=self._accepted,
+            u=0.5 * (lower + upper) if u is None else float(u),
+            show={"polygon": polygon, "construction": construction, "comb": comb, "basis": basis},
+            **kwargs,
+        )
+        self._draw()
+
+    @traitlets.observe("state", "request", "u", "show")
+    def _browser_changed(self, change):
+        # One browser message may set several of these traits; every notification lands
+        # here after all of them are set, and `_draw` draws each state once.
+        self._started = time.perf_counter()
+        if self.state != self._accepted:
+            try:
+                curve = _curve_of(self.state)
+            except (ValueError, KeyError, TypeError) as error:
+                # Back to the last curve the library accepted; the browser reverts with it.
+                self.state = self._accepted
+                self.drawing = {**self.drawing, "request": self.request, "error": str(error)}
+                return
+            self._accepted = self.state
+            self.curve = curve
+        self._draw()
+
+    @traitlets.observe("curve")
+    def _curve_changed(self, change):
+        self._accepted = _state_of(change["new"])
+        self.state = self._accepted
+        self._draw()
+
+    def _draw(self):
+        """Evaluate what the browser draws, and send it in one message."""
+        curve = self.curve
+        key = (self.request, id(curve), self.u, tuple(sorted(self.show.items())))
+        if key == self._drawn:
+            return
+        self._drawn = key
+        lower, upper = (float(x) for x in curve.domain)
+        u = min(max(self.u, lower), upper)
+        spans = len(np.unique(np.asarray(curve.knots)[curve.degree : -curve.degree])) - 1
+        per_span = self._per_span or max(4, min(24, _SAMPLES // spans))
+        points, comb, levels = _evaluate(curve, _parameters(curve, per_span), u)
+        drawing = {"request": self.request, "error": "", "curve": _packed(points)}
+        if self.show.get("construction"):
+            drawing["levels"] = [_listed(level) for level in levels]
+            drawing["point"] = _listed(levels[-1][0])
+        if self.show.get("comb"):
+            drawing["comb"] = _packed(comb)
+        if self.show.get("basis"):
+            drawing["basis"] = self._basis(curve, lower, upper)
+        # The kernel's share of the latency, from the browser's message to this drawing.
+        drawing["kernel_ms"] = 1e3 * (time.perf_counter() - self._started)
+        self.drawing = drawing
+
+    def _basis(self, curve, lower, upper):
+        key = (tuple(self._accepted["knots"]), curve.degree, str(self._accepted["weights"]))
+        if key != self._basis_key:
+            u = np.linspace(lower, upper, 241)
+            revision = self._basis_cache["revision"] + 1 if self._basis_cache else 0
+            self._basis_cache = {
+                "u": _listed(u),
+                "rows": _basis_rows(curve, u),
+                "revision": revision,
+            }
+            self._basis_key = key
+        return self._basis_cache
+
+    def _repr_mimebundle_(self, **kwargs):
+        bundle = super()._repr_mimebundle_(**kwargs)
+        if isinstance(bundle, tuple):
+            data, metadata = bundle
+        else:
+            data, metadata = bundle, {}
+        data = {**data, "image/png": self.picture()}
+        return data, metadata
+
+    def picture(self) -> bytes:
+        """A PNG of what the widget draws now (control polygon, curve, construction,
+        comb, basis functions), for pages where the widget cannot run."""
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        from matplotlib.collections import LineCollection
+        from matplotlib.figure import Figure
+
+        drawing, show = self.drawing, self.show
+        rows = 2 if show.get("basis") else 1
+        figure = Figure(figsize=(6, 5.2 if rows == 2 else 4), dpi=80)
+        grid = figure.add_gridspec(rows, 1, height_ratios=[3, 1][:rows])
+        ax = figure.add_subplot(grid[0])
+        curve = _unpacked(drawing["curve"])
+        net = np.asarray(self.curve.control_points)
+        if show.get("comb"):
+            tips = _unpacked(drawing["comb"])
+            teeth = np.stack([curve, tips], axis=1)
+            ax.add_collection(LineCollection(teeth, colors="#c9a0dc", linewidths=0.6))
+            ax.plot(tips[:, 0], tips[:, 1], color="#8e44ad", lw=0.8)
+        if show.get("polygon"):
+            ax.plot(net[:, 0], net[:, 1], "o--", color="0.55", lw=1, ms=5)
+        ax.plot(curve[:, 0], curve[:, 1], color="#1f6fb4", lw=2)
+        if show.get("construction"):
+            for level in drawing["levels"][1:]:
+                level = np.asarray(level)
+                ax.plot(level[:, 0], level[:, 1], "o-", color="#e67e22", lw=1, ms=3)
+            ax.plot(*drawing["point"], "o", color="#c0392b", ms=7)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_title("interactive in JupyterLab: drag the points", fontsize=9)
+        if show.get("basis"):
+            panel = figure.add_subplot(grid[1])
+            u = np.asarray(drawing["basis"]["u"])
+            for first, values in drawing["basis"]["rows"]:
+                panel.plot(u[first : first + len(values)], values, lw=1)
+            knots = np.asarray(self.curve.knots)
+            panel.plot(knots, np.zeros_like(knots), "k|", ms=10)
+            panel.set_xlabel("$u$")
+        figure.tight_layout()
+        buffer = io.BytesIO()
+        figure.savefig(buffer, format="png")
+        return buffer.getvalue()

@@ -1,0 +1,132 @@
+"""JupyterLab in a real Chromium, for the tests that use the course the way a student does.
+
+A `jupyter lab` server on 127.0.0.1 (started by the test, token-protected) and the system's
+Chromium driven by Playwright: Playwright's own browser download is not used, the browser is
+Debian's (`make install` adds it with apt where it is missing).
+"""
+
+import contextlib
+import json
+import os
+import secrets
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+from playwright.sync_api import TimeoutError as PlaywrightTimeout
+
+ROOT = Path(__file__).resolve().parents[1]
+BROWSER_OUT = ROOT / "build" / "browser"
+"""Screenshots and latency tables of the browser tests."""
+
+# Without the networking switches Chromium keeps calling out to Google's services, which
+# this machine's closed network refuses, many connections at a time.
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
+
+
+def chromium_path() -> str:
+    """The system Chromium; the test fails (not skips) without it, `make install` adds it."""
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        found = shutil.which(name)
+        if found:
+            return found
+    pytest.fail("no Chromium on PATH: run `make install` (it installs Debian's chromium)")
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@contextlib.contextmanager
+def jupyter_lab(root: Path):
+    """A JupyterLab server serving `root`; yields its base URL with the token."""
+    port, token = _free_port(), secrets.token_hex(16)
+    command = [
+        sys.executable, "-m", "jupyter", "lab", "--no-browser", "--ServerApp.ip=127.0.0.1",
+        f"--ServerApp.port={port}", f"--IdentityProvider.token={token}",
+        f"--ServerApp.root_dir={root}", "--LabApp.news_url=", "--LabApp.check_for_updates_class=",
+        "--ServerApp.kernel_websocket_connection_class=diffnurbs_course.lab.NoDelayConnection",
+    ]  # fmt: skip
+    if hasattr(os, "getuid") and os.getuid() == 0:
+        command.append("--allow-root")
+    # Settings and workspaces of this server only; no question about Jupyter's news.
+    settings = root / ".lab-settings" / "@jupyterlab" / "apputils-extension"
+    settings.mkdir(parents=True)
+    (settings / "notification.jupyterlab-settings").write_text('{"fetchNews": "false"}')
+    env = {
+        **os.environ,
+        "JUPYTER_CONFIG_DIR": str(root / ".jupyter-config"),
+        "JUPYTERLAB_SETTINGS_DIR": str(root / ".lab-settings"),
+        "JUPYTERLAB_WORKSPACES_DIR": str(root / ".lab-workspaces"),
+    }
+    log = open(root / "jupyter.log", "w")  # noqa: SIM115 (closed below)
+    server = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env)
+    url = f"http://127.0.0.1:{port}"
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            try:
+                with urllib.request.urlopen(f"{url}/api/status?token={token}", timeout=2) as r:
+                    json.load(r)
+                break
+            except OSError:
+                if server.poll() is not None or time.monotonic() > deadline:
+                    raise RuntimeError((root / "jupyter.log").read_text()) from None
+                time.sleep(0.3)
+        yield url, token
+    finally:
+        server.terminate()
+        try:
+            server.wait(20)
+        except subprocess.TimeoutExpired:
+            server.kill()
+        log.close()
+
+
+def wait_for_idle_kernel(page) -> None:
+    """Until the open notebook's kernel has started and is idle."""
+    page.locator(".jp-Notebook").first.wait_for()
+    # JupyterLab may ask which kernel to start (it does when the server is busy starting
+    # the notebook's own): take the one it proposes, the notebook's kernelspec.
+    dialog = page.locator(".jp-Dialog").get_by_role("button", name="Select")
+    with contextlib.suppress(PlaywrightTimeout):
+        dialog.click(timeout=5_000)
+    # The kernel must be idle before the cells are sent.
+    page.wait_for_selector(".jp-Notebook-ExecutionIndicator[data-status='idle']", timeout=120_000)
+
+
+def run_all(page) -> None:
+    """Run every cell of the open notebook, as Run > Run All Cells does, and wait for idle."""
+    wait_for_idle_kernel(page)
+    page.locator("#jp-MainMenu").get_by_text("Run", exact=True).click()
+    page.get_by_text("Run All Cells", exact=True).click()
+    page.wait_for_function(
+        "() => document.querySelectorAll('.jp-InputArea-prompt').length > 0 && "
+        "![...document.querySelectorAll('.jp-InputArea-prompt')]"
+        ".some(e => e.textContent.includes('*'))",
+        timeout=300_000,
+    )
+
+
+def error_outputs(page) -> list[str]:
+    """Texts of error and warning (stderr) outputs shown in the notebook."""
+    return page.eval_on_selector_all(
+        ".jp-OutputArea-output[data-mime-type='application/vnd.jupyter.stderr'], "
+        ".jp-RenderedText[data-mime-type='application/vnd.jupyter.stderr']",
+        "nodes => nodes.map(n => n.textContent)",
+    )

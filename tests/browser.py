@@ -130,3 +130,20 @@ def error_outputs(page) -> list[str]:
         ".jp-RenderedText[data-mime-type='application/vnd.jupyter.stderr']",
         "nodes => nodes.map(n => n.textContent)",
     )
+
+
+def drag(page, handle, dx: float, dy: float, steps: int = 5, pause_ms: float = 0) -> None:
+    """Press the mouse on the centre of `handle` (a locator), move it by `(dx, dy)` pixels in
+    `steps` pointer events `pause_ms` apart, and release it. The centre is measured after
+    hovering, which scrolls the handle into view, so a page still laying out does not move
+    it from under the pointer."""
+    handle.hover()
+    box = handle.bounding_box()
+    x, y = box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+    page.mouse.move(x, y)
+    page.mouse.down()
+    for step in range(1, steps + 1):
+        page.mouse.move(x + dx * step / steps, y + dy * step / steps)
+        if pause_ms:
+            page.wait_for_timeout(pause_ms)
+    page.mouse.up()

@@ -15,6 +15,7 @@ from browser import (
     CHROMIUM_ARGS,
     ROOT,
     chromium_path,
+    drag,
     error_outputs,
     jupyter_lab,
     run_all,
@@ -41,6 +42,7 @@ editor"""
 def lab(tmp_path_factory):
     """`(open, root)`: `open(name)` opens a notebook of `root` in JupyterLab in Chromium."""
     root = tmp_path_factory.mktemp("lab")
+    BROWSER_OUT.mkdir(parents=True, exist_ok=True)
     with jupyter_lab(root) as (url, token), playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium_path(), args=CHROMIUM_ARGS)
 
@@ -67,7 +69,6 @@ def page(lab):
         run_all(page)
         page.locator(".dn-editor").wait_for(timeout=120_000)
     except playwright.Error:
-        BROWSER_OUT.mkdir(parents=True, exist_ok=True)
         page.screenshot(path=BROWSER_OUT / "failure.png")
         raise
     yield page
@@ -99,18 +100,11 @@ def _wait_until_settled(page):
 
 
 def test_dragging_a_control_point_redraws_the_curve(page):
-    BROWSER_OUT.mkdir(parents=True, exist_ok=True)
     editor = page.locator(".dn-editor")
     editor.screenshot(path=BROWSER_OUT / "curve_editor_before.png")
     before, image_before = _curve_points(page), editor.screenshot()
-    point = page.locator(".dn-point").nth(50).bounding_box()
-    x, y = point["x"] + point["width"] / 2, point["y"] + point["height"] / 2
-    page.mouse.move(x, y)
-    page.mouse.down()
-    for step in range(1, 121):  # two seconds of dragging at 60 pointer events per second
-        page.mouse.move(x + 0.6 * step, y - 1.2 * step)
-        page.wait_for_timeout(16)
-    page.mouse.up()
+    # Two seconds of dragging at 60 pointer events per second.
+    drag(page, page.locator(".dn-point").nth(50), 72, -144, steps=120, pause_ms=16)
     _wait_until_settled(page)
     editor.screenshot(path=BROWSER_OUT / "curve_editor_after.png")
     assert _curve_points(page) != before
@@ -138,21 +132,39 @@ def test_dragging_a_control_point_redraws_the_curve(page):
 
 def test_dragging_a_knot_and_the_parameter(page):
     before = _curve_points(page)
-    knot = page.locator(".dn-knot.dn-inner").nth(40).bounding_box()
-    x, y = knot["x"] + knot["width"] / 2, knot["y"] + knot["height"] / 2
-    page.mouse.move(x, y)
-    page.mouse.down()
-    page.mouse.move(x + 2, y, steps=4)
-    page.mouse.up()
+    drag(page, page.locator(".dn-knot.dn-inner").nth(40), 2, 0, steps=4)
     _wait_until_settled(page)
     assert _curve_points(page) != before
     on_curve = page.locator(".dn-on-curve").bounding_box()
-    marker = page.locator(".dn-marker").bounding_box()
-    mx, my = marker["x"] + marker["width"] / 2, marker["y"] + marker["height"] / 2
-    page.mouse.move(mx, my)
-    page.mouse.down()
-    page.mouse.move(mx - 150, my, steps=5)
-    page.mouse.up()
+    drag(page, page.locator(".dn-marker"), -150, 0)
     _wait_until_settled(page)
     assert page.locator(".dn-on-curve").bounding_box() != on_curve
     assert not error_outputs(page)
+
+
+WIDGET_CHAPTERS = [
+    path for path in sorted((ROOT / "course").glob("*.ipynb")) if "dn.widgets." in path.read_text()
+]
+
+
+@pytest.mark.parametrize("chapter", WIDGET_CHAPTERS, ids=lambda path: path.stem)
+def test_chapter_runs_and_its_editors_answer_a_drag(lab, chapter):
+    open_notebook, root = lab
+    if not (root / "course").exists():
+        shutil.copytree(ROOT / "course", root / "course")
+    page = open_notebook(f"course/{chapter.name}")
+    run_all(page)
+    assert not error_outputs(page)
+    editors = page.locator(".dn-editor")
+    assert editors.count() >= 1
+    for index in range(editors.count()):
+        editor = editors.nth(index)
+        before = editor.locator(".dn-curve").get_attribute("points")
+        drag(page, editor.locator(".dn-point").nth(1), 25, -25)
+        page.wait_for_function(
+            "e => e.dataset.pending === '0'", arg=editor.element_handle(), timeout=60_000
+        )
+        editor.screenshot(path=BROWSER_OUT / f"{chapter.stem}_editor{index}.png")
+        assert editor.locator(".dn-curve").get_attribute("points") != before
+    assert not page.console_errors, [m.text for m in page.console_errors]
+    page.close()

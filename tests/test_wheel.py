@@ -44,6 +44,14 @@ class Installed:
             command, cwd=cwd, env=self.env, capture_output=True, text=True, timeout=300
         )
 
+    def assert_loads_from_wheel(self, code: str, package: str, cwd: Path) -> None:
+        """Run `python -c code`, whose last line prints a module's `__file__`: it must
+        succeed, and the module must be the wheel's copy of `package`."""
+        result = self.run("python", "-c", code, cwd=cwd)
+        assert result.returncode == 0, result.stderr
+        printed = Path(result.stdout.strip().splitlines()[-1])
+        assert printed.is_relative_to(self.site / package), printed
+
 
 def _check(command: list, **kwargs) -> subprocess.CompletedProcess:
     result = subprocess.run(command, capture_output=True, text=True, **kwargs)
@@ -78,13 +86,9 @@ def test_library_imports_from_the_wheel_without_course_dependencies(installed, t
         "assert not bad, bad\n"
         "print(diffnurbs.__file__)\n"
     )
-    result = installed.run("python", "-c", code, cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    assert Path(result.stdout.strip()).is_relative_to(installed.site / "diffnurbs")
+    installed.assert_loads_from_wheel(code, "diffnurbs", tmp_path)
     code = "import diffnurbs_course; print(diffnurbs_course.__file__)"
-    result = installed.run("python", "-c", code, cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    assert Path(result.stdout.strip()).is_relative_to(installed.site / "diffnurbs_course")
+    installed.assert_loads_from_wheel(code, "diffnurbs_course", tmp_path)
 
 
 def test_submodules_are_attributes_loaded_on_first_use(installed, tmp_path):
@@ -113,9 +117,7 @@ def test_widget_front_end_ships_in_the_wheel(installed, tmp_path):
         "assert 'export default' in editor._esm and '.dn-editor' in editor._css\n"
         "print(dn.widgets.__file__)\n"
     )
-    result = installed.run("python", "-c", code, cwd=tmp_path)
-    assert result.returncode == 0, result.stderr
-    assert Path(result.stdout.strip()).is_relative_to(installed.site / "diffnurbs")
+    installed.assert_loads_from_wheel(code, "diffnurbs", tmp_path)
 
 
 def test_installed_grader_scores_the_demo(installed, tmp_path):

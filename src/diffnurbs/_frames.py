@@ -149,7 +149,12 @@ def rmf_table(path: NURBSCurve) -> tuple[Array, Array, Array, Array]:
 
 @eqx.filter_jit
 def _rmf(path: NURBSCurve, v: Array) -> Array:
-    params, points, tangents, normals = rmf_table(path)
+    return _rmf_from(rmf_table(path), path, v)
+
+
+def _rmf_from(table, path: NURBSCurve, v: Array) -> Array:
+    """The RMF at `v`: one double reflection from the sample of `table` just below `v`."""
+    params, points, tangents, normals = table
     below = jnp.clip(jnp.searchsorted(params, v, side="right") - 1, 0, params.shape[0] - 1)
     ders = path.derivatives(v, 1)
     x, t = ders[..., 0, :], safe_normalize(ders[..., 1, :])
@@ -231,13 +236,24 @@ class KinematicSweep(AbstractSurface):
         self.path = path
         self.frame = _check_kind(frame)
 
-    def _local(self, u: Array) -> Array:
+    def _table(self):
+        """The RMF table of the path (None for Frenet frames), computed once per
+        evaluation and shared by every frame it needs: kept outside the autodiff of the
+        partials, the table's loop is traced once, not once per order."""
+        return rmf_table(self.path) if self.frame == "rmf" else None
+
+    def _frames(self, v: Array, table) -> Array:
+        if table is None:
+            return _frenet(self.path, v)
+        return _rmf_from(table, self.path, v)
+
+    def _local(self, u: Array, table) -> Array:
         """Profile points as coordinates along `(T, N, B)` of the frame at `v_min`."""
         points = self.profile(u)
         if self.profile.dim == 2:
             return jnp.concatenate([jnp.zeros_like(points[..., :1]), points], axis=-1)
         v_min = self.path.domain[0]
-        start = frames(self.path, v_min, self.frame)
+        start = self._frames(v_min, table)
         return (points - self.path(v_min)) @ start.T  # rows of A^T (C - g): X per point
 
     @property
@@ -249,23 +265,31 @@ class KinematicSweep(AbstractSurface):
     def dim(self) -> int:
         return 3
 
-    def _points(self, u: Array, v: Array) -> Array:
-        local = self._local(u)
-        frame = frames(self.path, v, self.frame)
+    def _evaluate(self, u: Array, v: Array, table) -> Array:
+        local = self._local(u, table)
+        frame = self._frames(v, table)
         return self.path(v) + jnp.einsum("...k,...kd->...d", local, frame)
 
+    @eqx.filter_jit
+    def _points(self, u: Array, v: Array) -> Array:
+        return self._evaluate(u, v, self._table())
+
+    @eqx.filter_jit
     def _grid(self, us: Array, vs: Array) -> Array:
         # The profile and the frames are evaluated once per u and once per v.
-        local = self._local(us)
-        frame = frames(self.path, vs, self.frame)
+        table = self._table()
+        local = self._local(us, table)
+        frame = self._frames(vs, table)
         return self.path(vs)[None] + jnp.einsum("ik,jkd->ijd", local, frame)
 
     @eqx.filter_jit
     def _derivatives(self, u: Array, v: Array, order: int) -> Array:
-        return autodiff_partials(self._points, u, v, order)
+        table = self._table()
+        return autodiff_partials(lambda u, v: self._evaluate(u, v, table), u, v, order)
 
     def _second_order(self, u: Array, v: Array) -> tuple[Array, Array, Array]:
-        return autodiff_second_order(self._points, u, v)
+        table = self._table()
+        return autodiff_second_order(lambda u, v: self._evaluate(u, v, table), u, v)
 
     def _sampling(self):
         p, q = self.profile.degree, self.path.degree

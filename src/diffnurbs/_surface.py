@@ -175,8 +175,10 @@ def _total_derivatives(points, u: Array, v: Array, total: int) -> list[Array]:
     its last `m` axes picking `u` (0) or `v` (1) for each differentiation.
 
     Each order is one more forward-mode pass over the program of the previous ones, which
-    it carries along as auxiliary output: the program doubles per order, instead of
-    repeating the whole nest for every entry `(k, l)` of a table.
+    it carries along as auxiliary output, so lower orders are not traced again. For the
+    second order this compiles faster than a nest per entry (measured: a Coons patch's
+    point inversion 12.5 s against 18 s); for a whole table of `autodiff_partials` the
+    nests compile faster.
     """
 
     def differentiated(orders):
@@ -212,11 +214,15 @@ def autodiff_partials(points, u: Array, v: Array, order: int) -> Array:
     """
 
     def table(u, v):
-        ders = _total_derivatives(points, u, v, 2 * order)
-        entry = lambda k, l: ders[k + l][(Ellipsis,) + (0,) * k + (1,) * l]  # noqa: E731
-        return jnp.stack(
-            [jnp.stack([entry(k, l) for l in range(order + 1)]) for k in range(order + 1)]
-        )
+        rows, along_u = [], points
+        for _ in range(order + 1):
+            row, along_v = [], along_u
+            for _ in range(order + 1):
+                row.append(along_v(u, v))
+                along_v = jax.jacfwd(along_v, argnums=1)
+            rows.append(jnp.stack(row))
+            along_u = jax.jacfwd(along_u, argnums=0)
+        return jnp.stack(rows)
 
     flat = jax.vmap(table)(jnp.ravel(u), jnp.ravel(v))
     return flat.reshape(u.shape + flat.shape[1:])
@@ -224,8 +230,8 @@ def autodiff_partials(points, u: Array, v: Array, order: int) -> Array:
 
 def autodiff_second_order(points, u: Array, v: Array) -> tuple[Array, Array, Array]:
     """`S`, its Jacobian and its Hessian in `(u, v)` by forward-mode autodiff; see
-    `AbstractSurface._second_order`. Four copies of the program of `points`, where the
-    table of `autodiff_partials(..., order=2)` needs sixteen.
+    `AbstractSurface._second_order`: the entries that point inversion uses, without the
+    partials of order 3 and 4 that the table of `autodiff_partials(..., order=2)` holds.
     """
     flat = jax.vmap(lambda u, v: _total_derivatives(points, u, v, 2))(jnp.ravel(u), jnp.ravel(v))
     return tuple(d.reshape(u.shape + d.shape[1:]) for d in flat)

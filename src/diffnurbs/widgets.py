@@ -208,6 +208,9 @@ class CurveEditor(anywidget.AnyWidget):
         per_span = self._per_span or max(4, min(24, _SAMPLES // spans))
         points, comb, levels = _evaluate(curve, _parameters(curve, per_span), u)
         drawing = {"request": self.request, "error": "", "curve": _packed(points)}
+        # Samples per non-empty knot span: the browser finds the part of the curve that the
+        # selected control point acts on from it.
+        drawing["per_span"] = per_span
         if self.show.get("construction"):
             drawing["levels"] = [_listed(level) for level in levels]
             drawing["point"] = _listed(levels[-1][0])

@@ -93,6 +93,7 @@ function render({ model, el }) {
   const combLine = node("polyline", { class: "dn-comb" }, svg);
   const polygon = node("polyline", { class: "dn-polygon" }, svg);
   const curveLine = node("polyline", { class: "dn-curve" }, svg);
+  const supportLine = node("polyline", { class: "dn-support" }, svg);
   const levelGroup = node("g", { class: "dn-levels" }, svg);
   const pointGroup = node("g", { class: "dn-points" }, svg);
   const strip = node("g", { transform: `translate(0, ${HEIGHT})`, class: "dn-strip" }, svg);
@@ -176,6 +177,30 @@ function render({ model, el }) {
   };
 
   // --- drawing ---------------------------------------------------------------------------
+  function drawSelection() {
+    // The part of the curve and the basis function of the selected control point.
+    const drawing = model.get("drawing");
+    if (drawing.curve) {
+      const curve = pairs(drawing.curve);
+      supportLine.setAttribute("points", pathOf(supported(curve, drawing.per_span), toScreen));
+    }
+    panel.childNodes.forEach((line, i) => line.classList.toggle("dn-basis-selected", i === selected));
+  }
+  function supported(curve, perSpan) {
+    // The samples on [U[k], U[k + p + 1]], where the selected point P_k acts: the kernel
+    // samples each non-empty span at `perSpan` even steps, then the end of the domain.
+    const { knots, degree } = state;
+    const inner = knots.slice(degree, knots.length - degree);
+    const breaks = inner.filter((u, i) => i === 0 || u > inner[i - 1]);
+    const [lower, upper] = [knots[selected], knots[selected + degree + 1]];
+    return curve.filter((_, j) => {
+      const span = Math.min(Math.floor(j / perSpan), breaks.length - 1);
+      const u = span === breaks.length - 1 ? breaks[span]
+        : breaks[span] + ((j % perSpan) / perSpan) * (breaks[span + 1] - breaks[span]);
+      return u >= lower && u <= upper;
+    });
+  }
+
   function drawPoints() {
     const points = state.control_points;
     polygon.setAttribute("points", pathOf(points, toScreen));
@@ -264,9 +289,8 @@ function render({ model, el }) {
     }
     // The basis functions change with the knots, the degree and the weights only.
     const revision = show.basis && drawing.basis ? drawing.basis.revision : null;
-    if (revision !== panel.revision || selected !== panel.selected) {
+    if (revision !== panel.revision) {
       panel.revision = revision;
-      panel.selected = selected;
       panel.replaceChildren();
     }
     if (show.basis && drawing.basis && !panel.hasChildNodes()) {
@@ -276,10 +300,10 @@ function render({ model, el }) {
       const y = (value) => PANEL - 8 - value * (PANEL - 20);
       rows.forEach(([first, values], i) => {
         const points = values.map((value, k) => `${x(u[first + k])},${y(value)}`).join(" ");
-        node("polyline", { points, class: "dn-basis" + (i === selected ? " dn-basis-selected" : ""),
-          stroke: COLORS[i % COLORS.length] }, panel);
+        node("polyline", { points, class: "dn-basis", stroke: COLORS[i % COLORS.length] }, panel);
       });
     }
+    drawSelection();
     for (const key of Object.keys(toggles)) toggles[key].checked = Boolean(show[key]);
   }
 
@@ -308,7 +332,10 @@ function render({ model, el }) {
   }
   function movePoint(index, event, first) {
     selected = index;
-    if (first) return drawPoints();
+    if (first) {
+      drawPoints();
+      return drawSelection();
+    }
     const [x, y] = local(event);
     const [wx, wy] = toWorld(Math.min(Math.max(x, 0), WIDTH), Math.min(Math.max(y, 0), HEIGHT));
     state.control_points[index] = [round(wx), round(wy)];

@@ -10,7 +10,7 @@ import pytest
 from helpers import random_curve
 
 import diffnurbs as dn
-from diffnurbs.widgets import CurveEditor
+from diffnurbs.widgets import CurveEditor, PointsEditor
 
 
 def browser_edit(editor, **state):
@@ -111,3 +111,48 @@ def test_bad_arguments():
         CurveEditor(np.eye(4, 2))
     with pytest.raises(ValueError, match="samples_per_span must be >= 2"):
         CurveEditor(dn.circle(1.0), samples_per_span=1)
+
+
+def midpoints(points):
+    return {"midpoints": (points[1:] + points[:-1]) / 2}
+
+
+def test_points_editor_draws_what_its_function_returns():
+    editor = PointsEditor([[0, 0], [1, 0], [1, 1]], midpoints)
+    (line,) = editor.drawing["lines"]
+    assert line["label"] == "midpoints"
+    np.testing.assert_array_equal(unpacked(line["data"]), [[0.5, 0], [1, 0.5]])
+    browser_edit(editor, control_points=[[0, 0], [3, 0], [1, 1]])
+    np.testing.assert_array_equal(editor.points[1], [3, 0])
+    np.testing.assert_array_equal(
+        unpacked(editor.drawing["lines"][0]["data"]), [[1.5, 0], [2, 0.5]]
+    )
+    assert editor.drawing["request"] == 1 and editor.drawing["error"] == ""
+
+
+def test_points_editor_refuses_what_its_function_refuses():
+    def positive(points):
+        if np.any(points[:, 1] < 0):
+            raise ValueError("every point must lie above the x axis")
+        return {"polygon": points}
+
+    editor = PointsEditor([[0, 1], [1, 2]], positive)
+    browser_edit(editor, control_points=[[0, 1], [1, -2]])
+    assert editor.drawing["error"] == "every point must lie above the x axis"
+    np.testing.assert_array_equal(editor.points, [[0, 1], [1, 2]])
+    assert editor.state == {"control_points": [[0.0, 1.0], [1.0, 2.0]]}
+    browser_edit(editor, control_points=[[0, 1], [1, 2], [2, 2]])
+    assert editor.drawing["error"] == "expected 2 points, got 3"
+    data, _ = editor._repr_mimebundle_()
+    assert data["image/png"].startswith(b"\x89PNG")
+
+
+def test_points_editor_bad_arguments():
+    with pytest.raises(ValueError, match=r"points must have shape \(count, 2\), got \(3,\)"):
+        PointsEditor([1, 2, 3], midpoints)
+    with pytest.raises(ValueError, match="draw must be a function"):
+        PointsEditor([[0, 0]], None)
+    with pytest.raises(ValueError, match="draw must return a dict"):
+        PointsEditor([[0, 0]], lambda points: points)
+    with pytest.raises(ValueError, match=r"'x' must have shape \(m, 2\), got \(3,\)"):
+        PointsEditor([[0, 0]], lambda points: {"x": [1, 2, 3]})

@@ -7,12 +7,15 @@ what the widget shows is exactly what `editor.curve` computes.
 import io
 import pathlib
 import time
+import typing
+from collections.abc import Callable
 
 import anywidget
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import traitlets
+from jaxtyping import ArrayLike
 
 from ._basis import basis_matrix
 from ._curve import NURBSCurve
@@ -104,7 +107,80 @@ def _basis_rows(curve: NURBSCurve, u: np.ndarray) -> list:
     return rows
 
 
-class CurveEditor(anywidget.AnyWidget):
+class _AbstractEditor(anywidget.AnyWidget):
+    """What the editors share: the browser edits `state` and numbers each edit (`request`);
+    the kernel accepts or refuses it (`_accept`) and answers with one `drawing` per edit.
+    Displayed outside a live Jupyter front end (nbconvert, a static site), an editor shows
+    a picture of its state (`picture`)."""
+
+    _esm = _STATIC / "curve_editor.js"
+    _css = _STATIC / "curve_editor.css"
+
+    # Synchronised with the browser: what it edits ...
+    mode = traitlets.Unicode("curve").tag(sync=True)
+    state = traitlets.Dict().tag(sync=True)
+    u = traitlets.Float(0.5).tag(sync=True)
+    show = traitlets.Dict().tag(sync=True)
+    request = traitlets.Int(0).tag(sync=True)
+    # ... and what the kernel computes for it to draw.
+    drawing = traitlets.Dict().tag(sync=True)
+
+    def _accept(self, state: dict) -> None:
+        """Take the browser's `state` (raise `ValueError` to refuse it with a message)."""
+        raise NotImplementedError
+
+    def _draw(self) -> None:
+        """Evaluate what the browser draws and set `drawing`, once per state."""
+        raise NotImplementedError
+
+    def picture(self) -> bytes:
+        """A PNG of what the editor draws now, for pages where it cannot run."""
+        raise NotImplementedError
+
+    @traitlets.observe("state", "request", "u", "show")
+    def _browser_changed(self, change):
+        # One browser message may set several of these traits; every notification lands
+        # here after all of them are set, and `_draw` draws each state once.
+        self._started = time.perf_counter()
+        if self.state != self._accepted:
+            try:
+                self._accept(self.state)
+            except (ValueError, KeyError, TypeError) as error:
+                # Back to the last state the kernel accepted; the browser reverts with it.
+                self.state = self._accepted
+                self.drawing = {**self.drawing, "request": self.request, "error": str(error)}
+                return
+        self._draw()
+
+    def _publish(self, drawing: dict) -> None:
+        # The kernel's share of the latency, from the browser's message to this drawing.
+        drawing["kernel_ms"] = 1e3 * (time.perf_counter() - self._started)
+        self.drawing = drawing
+
+    def _repr_mimebundle_(self, **kwargs):
+        bundle = super()._repr_mimebundle_(**kwargs)
+        data, metadata = bundle if isinstance(bundle, tuple) else (bundle, {})
+        return {**data, "image/png": self.picture()}, metadata
+
+
+def _png(figure) -> bytes:
+    figure.tight_layout()
+    buffer = io.BytesIO()
+    figure.savefig(buffer, format="png")
+    return buffer.getvalue()
+
+
+def _figure(size):
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=size, dpi=80)
+
+
+@typing.final
+class CurveEditor(_AbstractEditor):
     """Edit a planar `NURBSCurve` by hand: drag, add and delete control points, change
     weights, drag knots, and watch de Boor's construction, the curvature comb and the
     basis functions follow.
@@ -120,17 +196,7 @@ class CurveEditor(anywidget.AnyWidget):
     static site), the widget shows a picture of its state.
     """
 
-    _esm = _STATIC / "curve_editor.js"
-    _css = _STATIC / "curve_editor.css"
-
     curve = traitlets.Instance(NURBSCurve)
-    # Synchronised with the browser: what it edits ...
-    state = traitlets.Dict().tag(sync=True)
-    u = traitlets.Float(0.5).tag(sync=True)
-    show = traitlets.Dict().tag(sync=True)
-    request = traitlets.Int(0).tag(sync=True)
-    # ... and what the kernel computes for it to draw.
-    drawing = traitlets.Dict().tag(sync=True)
 
     def __init__(
         self,
@@ -172,22 +238,10 @@ class CurveEditor(anywidget.AnyWidget):
         )
         self._draw()
 
-    @traitlets.observe("state", "request", "u", "show")
-    def _browser_changed(self, change):
-        # One browser message may set several of these traits; every notification lands
-        # here after all of them are set, and `_draw` draws each state once.
-        self._started = time.perf_counter()
-        if self.state != self._accepted:
-            try:
-                curve = _curve_of(self.state)
-            except (ValueError, KeyError, TypeError) as error:
-                # Back to the last curve the library accepted; the browser reverts with it.
-                self.state = self._accepted
-                self.drawing = {**self.drawing, "request": self.request, "error": str(error)}
-                return
-            self._accepted = self.state
-            self.curve = curve
-        self._draw()
+    def _accept(self, state):
+        curve = _curve_of(state)
+        self._accepted = state
+        self.curve = curve
 
     @traitlets.observe("curve")
     def _curve_changed(self, change):
@@ -218,9 +272,7 @@ class CurveEditor(anywidget.AnyWidget):
             drawing["comb"] = _packed(comb)
         if self.show.get("basis"):
             drawing["basis"] = self._basis(curve, lower, upper)
-        # The kernel's share of the latency, from the browser's message to this drawing.
-        drawing["kernel_ms"] = 1e3 * (time.perf_counter() - self._started)
-        self.drawing = drawing
+        self._publish(drawing)
 
     def _basis(self, curve, lower, upper):
         key = (tuple(self._accepted["knots"]), curve.degree, str(self._accepted["weights"]))
@@ -235,27 +287,14 @@ class CurveEditor(anywidget.AnyWidget):
             self._basis_key = key
         return self._basis_cache
 
-    def _repr_mimebundle_(self, **kwargs):
-        bundle = super()._repr_mimebundle_(**kwargs)
-        if isinstance(bundle, tuple):
-            data, metadata = bundle
-        else:
-            data, metadata = bundle, {}
-        data = {**data, "image/png": self.picture()}
-        return data, metadata
-
     def picture(self) -> bytes:
         """A PNG of what the widget draws now (control polygon, curve, construction,
         comb, basis functions), for pages where the widget cannot run."""
-        import matplotlib
-
-        matplotlib.use("Agg", force=False)
         from matplotlib.collections import LineCollection
-        from matplotlib.figure import Figure
 
         drawing, show = self.drawing, self.show
         rows = 2 if show.get("basis") else 1
-        figure = Figure(figsize=(6, 5.2 if rows == 2 else 4), dpi=80)
+        figure = _figure((6, 5.2 if rows == 2 else 4))
         grid = figure.add_gridspec(rows, 1, height_ratios=[3, 1][:rows])
         ax = figure.add_subplot(grid[0])
         curve = _unpacked(drawing["curve"])
@@ -283,7 +322,78 @@ class CurveEditor(anywidget.AnyWidget):
             knots = np.asarray(self.curve.knots)
             panel.plot(knots, np.zeros_like(knots), "k|", ms=10)
             panel.set_xlabel("$u$")
-        figure.tight_layout()
-        buffer = io.BytesIO()
-        figure.savefig(buffer, format="png")
-        return buffer.getvalue()
+        return _png(figure)
+
+
+@typing.final
+class PointsEditor(_AbstractEditor):
+    """Drag points and see what a Python function draws from them: for constructions that
+    are not a single NURBS curve (a PH curve through three points, a chain of segments).
+
+    `draw(points)` gets the points as an array `(count, 2)` and returns a dict from a label
+    to the points `(m, 2)` of a polyline to draw (the labels make the legend); a
+    `ValueError` it raises is shown as the message and the drag is refused. The current
+    points are `editor.points`, a trait you can `observe`.
+    """
+
+    points = traitlets.Instance(np.ndarray)
+
+    def __init__(self, points: ArrayLike, draw: Callable[[np.ndarray], dict], **kwargs):
+        """**Arguments:**
+
+        - `points`: the starting points, shape `(count, 2)`.
+        - `draw`: the function from points to labelled polylines (see the class).
+        - `kwargs`: passed to `anywidget.AnyWidget`.
+        """
+        points = np.array(points, dtype=float)
+        if points.ndim != 2 or points.shape[1] != 2 or len(points) == 0:
+            raise ValueError(f"points must have shape (count, 2), got {points.shape}")
+        if not callable(draw):
+            raise ValueError(f"draw must be a function of the points, got {draw!r}")
+        self._function = draw
+        self._drawn = None
+        self._started = time.perf_counter()
+        self._lines = self._lines_of(points)  # a bad start raises here, before any display
+        self._accepted = {"control_points": _listed(points)}
+        super().__init__(mode="points", points=points, state=self._accepted, show={}, **kwargs)
+        self._draw()
+
+    def _lines_of(self, points):
+        lines = self._function(points)
+        if not isinstance(lines, dict):
+            raise ValueError(f"draw must return a dict of label -> (m, 2) points, got {lines!r}")
+        checked = {}
+        for label, line in lines.items():
+            line = np.asarray(line, dtype=float)
+            if line.ndim != 2 or line.shape[1] != 2:
+                raise ValueError(f"draw's {label!r} must have shape (m, 2), got {line.shape}")
+            checked[str(label)] = line
+        return checked
+
+    def _accept(self, state):
+        points = np.asarray(state["control_points"], dtype=float)
+        if points.shape != self.points.shape:
+            raise ValueError(f"expected {len(self.points)} points, got {len(points)}")
+        self._lines = self._lines_of(points)
+        self._accepted = state
+        self.points = points
+
+    def _draw(self):
+        key = (self.request, id(self._lines))
+        if key == self._drawn:
+            return
+        self._drawn = key
+        lines = [{"label": label, "data": _packed(line)} for label, line in self._lines.items()]
+        self._publish({"request": self.request, "error": "", "lines": lines})
+
+    def picture(self) -> bytes:
+        figure = _figure((6, 4.5))
+        ax = figure.add_subplot()
+        points = np.asarray(self.points)
+        for label, line in self._lines.items():
+            ax.plot(line[:, 0], line[:, 1], lw=2, label=label)
+        ax.plot(points[:, 0], points[:, 1], "o", color="0.3", ms=7, label="points (drag them)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.legend(fontsize=8)
+        ax.set_title("interactive in JupyterLab: drag the points", fontsize=9)
+        return _png(figure)

@@ -81,13 +81,20 @@ function render({ model, el }) {
   weightInput.className = "dn-weight";
   weightBox.append("weight of P", document.createElement("span"), " ", weightInput);
   bar.appendChild(weightBox);
+  // "points": a PointsEditor, which drags points and draws the kernel's labelled lines.
+  const pointsMode = model.get("mode") === "points";
+  if (pointsMode) bar.style.display = "none";
+  const legend = document.createElement("div");
+  legend.className = "dn-legend";
   const message = document.createElement("div");
   message.className = "dn-message";
   root.appendChild(message);
 
   // --- drawing surface -------------------------------------------------------------------
-  const svg = node("svg", { width: WIDTH, height: HEIGHT + STRIP + PANEL, class: "dn-svg" });
+  const svg = node("svg", { width: WIDTH, height: pointsMode ? HEIGHT : HEIGHT + STRIP + PANEL,
+    class: "dn-svg" });
   root.appendChild(svg);
+  root.appendChild(legend);
   node("rect", { x: 0, y: 0, width: WIDTH, height: HEIGHT, class: "dn-plot" }, svg);
   const combTeeth = node("path", { class: "dn-comb-teeth" }, svg);
   const combLine = node("polyline", { class: "dn-comb" }, svg);
@@ -95,6 +102,7 @@ function render({ model, el }) {
   const curveLine = node("polyline", { class: "dn-curve" }, svg);
   const supportLine = node("polyline", { class: "dn-support" }, svg);
   const levelGroup = node("g", { class: "dn-levels" }, svg);
+  const lineGroup = node("g", { class: "dn-lines" }, svg);
   const pointGroup = node("g", { class: "dn-points" }, svg);
   const strip = node("g", { transform: `translate(0, ${HEIGHT})`, class: "dn-strip" }, svg);
   node("line", { x1: PAD, x2: WIDTH - PAD, y1: 22, y2: 22, class: "dn-axis" }, strip);
@@ -225,6 +233,10 @@ function render({ model, el }) {
     const w = state.weights ? state.weights[selected] : 1;
     weightBox.querySelector("span").textContent = String(selected);
     if (document.activeElement !== weightInput) weightInput.value = w;
+    if (pointsMode) {
+      polygon.style.display = "none";
+      return;
+    }
     const options = [];
     for (let p = 1; p < Math.min(points.length, 8); p++) options.push(p);
     if (degreeInput.options.length !== options.length) {
@@ -234,6 +246,7 @@ function render({ model, el }) {
   }
 
   function drawKnots() {
+    if (pointsMode) return;
     const knots = state.knots;
     while (knotGroup.childNodes.length > knots.length) knotGroup.lastChild.remove();
     while (knotGroup.childNodes.length < knots.length) {
@@ -255,9 +268,26 @@ function render({ model, el }) {
     marker.setAttribute("transform", `translate(${stripX(uValue)}, 0)`);
   }
 
+  function drawLines(drawing) {
+    if (!drawing.lines) return;
+    lineGroup.replaceChildren();
+    legend.replaceChildren();
+    drawing.lines.forEach(({ label, data }, i) => {
+      const color = COLORS[i % COLORS.length];
+      node("polyline", { points: pathOf(pairs(data), toScreen), class: "dn-line", stroke: color },
+        lineGroup);
+      const entry = document.createElement("span");
+      entry.className = "dn-legend-entry";
+      entry.style.borderColor = color;
+      entry.textContent = label;
+      legend.appendChild(entry);
+    });
+  }
+
   function drawCurve() {
     const drawing = model.get("drawing");
     message.textContent = drawing.error || "";
+    if (pointsMode) return drawLines(drawing);
     if (!drawing.curve) return;
     const curve = pairs(drawing.curve);
     curveLine.setAttribute("points", pathOf(curve, toScreen));
@@ -366,6 +396,7 @@ function render({ model, el }) {
     edited(performance.now());
   }
   svg.addEventListener("dblclick", (event) => {
+    if (pointsMode) return;
     const [x, y] = local(event);
     if (y > HEIGHT) return;
     const q = toWorld(x, y);
@@ -390,6 +421,7 @@ function render({ model, el }) {
   });
   pointGroup.addEventListener("contextmenu", (event) => {
     event.preventDefault();
+    if (pointsMode) return;
     const index = Number(event.target.dataset.index);
     const points = state.control_points;
     if (Number.isNaN(index) || points.length <= state.degree + 1) {
@@ -410,7 +442,7 @@ function render({ model, el }) {
   }
   pointGroup.addEventListener("wheel", (event) => {
     const index = Number(event.target.dataset.index);
-    if (Number.isNaN(index)) return;
+    if (pointsMode || Number.isNaN(index)) return;
     event.preventDefault();
     selected = index;
     const w = state.weights ? state.weights[index] : 1;
@@ -475,7 +507,9 @@ function render({ model, el }) {
   model.on("change:state", onState);
   model.on("change:u", onU);
 
-  fit(state.control_points);
+  // A points editor frames its lines too: what the kernel draws may reach beyond the points.
+  const lines = pointsMode ? (model.get("drawing").lines || []).flatMap(({ data }) => pairs(data)) : [];
+  fit([...state.control_points, ...lines]);
   drawPoints();
   drawCurve();
   return () => {

@@ -99,6 +99,26 @@ def _wait_until_settled(page):
     page.wait_for_selector(".dn-editor[data-pending='0']", timeout=60_000)
 
 
+def record_latencies(editor, title: str, name: str) -> np.ndarray:
+    """Write the editor's drag-to-redraw times, and their parts, to
+    `build/browser/latency_<name>.md`; return the drag-to-redraw times."""
+    rows = {
+        "pointer move -> redrawn curve": "data-latencies",
+        "request -> drawing (kernel and transport)": "data-round-trips",
+        "kernel: evaluation and message": "data-kernel-times",
+        "redraw in the browser": "data-draw-times",
+    }
+    lines = [f"| {title} | count | min ms | median ms | p95 ms |", "|---|---|---|---|---|"]
+    for row, attribute in rows.items():
+        values = np.asarray(json.loads(editor.get_attribute(attribute)))
+        lines.append(
+            f"| {row} | {len(values)} | {values.min():.0f} | {np.median(values):.0f} | "
+            f"{np.percentile(values, 95):.0f} |"
+        )
+    (BROWSER_OUT / f"latency_{name}.md").write_text("\n".join(lines) + "\n")
+    return np.asarray(json.loads(editor.get_attribute("data-latencies")))
+
+
 def test_dragging_a_control_point_redraws_the_curve(page):
     editor = page.locator(".dn-editor")
     editor.screenshot(path=BROWSER_OUT / "curve_editor_before.png")
@@ -109,23 +129,10 @@ def test_dragging_a_control_point_redraws_the_curve(page):
     editor.screenshot(path=BROWSER_OUT / "curve_editor_after.png")
     assert _curve_points(page) != before
     assert editor.screenshot() != image_before
-    latencies = np.asarray(json.loads(editor.get_attribute("data-latencies")))
+    latencies = record_latencies(
+        editor, "CurveEditor, 100 control points, degree 3", "curve_editor"
+    )
     assert len(latencies) == 120, "every pointer move must reach a redraw"
-    rows = {
-        "pointer move -> redrawn curve": latencies,
-        "request -> drawing (kernel and transport)": editor.get_attribute("data-round-trips"),
-        "kernel: evaluation and message": editor.get_attribute("data-kernel-times"),
-        "redraw in the browser": editor.get_attribute("data-draw-times"),
-    }
-    lines = ["| CurveEditor, 100 control points, degree 3 | count | min ms | median ms | p95 ms |"]
-    lines.append("|---|---|---|---|---|")
-    for name, values in rows.items():
-        values = np.asarray(json.loads(values) if isinstance(values, str) else values)
-        lines.append(
-            f"| {name} | {len(values)} | {values.min():.0f} | {np.median(values):.0f} | "
-            f"{np.percentile(values, 95):.0f} |"
-        )
-    (BROWSER_OUT / "latency.md").write_text("\n".join(lines) + "\n")
     assert not error_outputs(page)
     assert not page.console_errors, [m.text for m in page.console_errors]
 
@@ -167,11 +174,14 @@ def test_chapter_runs_and_its_editors_answer_a_drag(lab, chapter):
     for index in range(editors.count()):
         editor = editors.nth(index)
         before = _drawn_lines(editor)
-        drag(page, editor.locator(".dn-point").nth(1), 25, -25)
+        # One second of dragging at 60 pointer events per second.
+        drag(page, editor.locator(".dn-point").nth(1), 30, -30, steps=60, pause_ms=16)
         page.wait_for_function(
             "e => e.dataset.pending === '0'", arg=editor.element_handle(), timeout=60_000
         )
         editor.screenshot(path=BROWSER_OUT / f"{chapter.stem}_editor{index}.png")
         assert _drawn_lines(editor) != before
+        name = f"{chapter.stem}_editor{index}"
+        assert len(record_latencies(editor, f"{chapter.stem}, editor {index}", name)) == 60
     assert not page.console_errors, [m.text for m in page.console_errors]
     page.close()

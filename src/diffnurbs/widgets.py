@@ -4,6 +4,7 @@ The browser draws and reports edits; the kernel evaluates every curve with the l
 what the widget shows is exactly what `editor.curve` computes.
 """
 
+import abc
 import io
 import pathlib
 import time
@@ -30,7 +31,13 @@ _DIGITS = 7
 
 
 def _listed(array) -> list:
+    """What is only drawn, rounded for a shorter message."""
     return np.round(np.asarray(array, dtype=float), _DIGITS).tolist()
+
+
+def _exact(array) -> list:
+    """What is edited, in full: the curve rebuilt from the state is the curve."""
+    return np.asarray(array, dtype=float).tolist()
 
 
 def _packed(points) -> bytes:
@@ -46,11 +53,11 @@ def _unpacked(data: bytes) -> np.ndarray:
 def _state_of(curve: NURBSCurve) -> dict:
     if curve.dim != 2:
         raise ValueError(f"CurveEditor edits planar curves, got dim = {curve.dim}")
-    weights = None if curve.weights is None else _listed(curve.weights)
+    weights = None if curve.weights is None else _exact(curve.weights)
     return {
-        "control_points": _listed(curve.control_points),
+        "control_points": _exact(curve.control_points),
         "weights": weights,
-        "knots": _listed(curve.knots),
+        "knots": _exact(curve.knots),
         "degree": curve.degree,
     }
 
@@ -107,7 +114,11 @@ def _basis_rows(curve: NURBSCurve, u: np.ndarray) -> list:
     return rows
 
 
-class _AbstractEditor(anywidget.AnyWidget):
+class _EditorMeta(type(anywidget.AnyWidget), abc.ABCMeta):
+    """traitlets' metaclass with abstract methods enforced."""
+
+
+class _AbstractEditor(anywidget.AnyWidget, metaclass=_EditorMeta):
     """What the editors share: the browser edits `state` and numbers each edit (`request`);
     the kernel accepts or refuses it (`_accept`) and answers with one `drawing` per edit.
     Displayed outside a live Jupyter front end (nbconvert, a static site), an editor shows
@@ -125,17 +136,17 @@ class _AbstractEditor(anywidget.AnyWidget):
     # ... and what the kernel computes for it to draw.
     drawing = traitlets.Dict().tag(sync=True)
 
+    @abc.abstractmethod
     def _accept(self, state: dict) -> None:
         """Take the browser's `state` (raise `ValueError` to refuse it with a message)."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def _draw(self) -> None:
         """Evaluate what the browser draws and set `drawing`, once per state."""
-        raise NotImplementedError
 
+    @abc.abstractmethod
     def picture(self) -> bytes:
         """A PNG of what the editor draws now, for pages where it cannot run."""
-        raise NotImplementedError
 
     @traitlets.observe("state", "request", "u", "show")
     def _browser_changed(self, change):
@@ -228,6 +239,7 @@ class CurveEditor(_AbstractEditor):
         self._basis_key = self._basis_cache = self._drawn = None
         self._started = time.perf_counter()
         self._accepted = _state_of(curve)
+        self._from_browser = None
         lower, upper = (float(x) for x in curve.domain)
         super().__init__(
             curve=curve,
@@ -241,12 +253,14 @@ class CurveEditor(_AbstractEditor):
     def _accept(self, state):
         curve = _curve_of(state)
         self._accepted = state
+        self._from_browser = curve
         self.curve = curve
 
     @traitlets.observe("curve")
     def _curve_changed(self, change):
-        self._accepted = _state_of(change["new"])
-        self.state = self._accepted
+        if change["new"] is not self._from_browser:  # a curve assigned from Python
+            self._accepted = _state_of(change["new"])
+            self.state = self._accepted
         self._draw()
 
     def _draw(self):
@@ -260,7 +274,8 @@ class CurveEditor(_AbstractEditor):
         u = min(max(self.u, lower), upper)
         spans = len(np.unique(np.asarray(curve.knots)[curve.degree : -curve.degree])) - 1
         per_span = self._per_span or max(4, min(24, _SAMPLES // spans))
-        points, comb, levels = _evaluate(curve, _parameters(curve, per_span), u)
+        # `u` as an array: filter_jit would compile again for every new Python float.
+        points, comb, levels = _evaluate(curve, _parameters(curve, per_span), jnp.asarray(u))
         drawing = {"request": self.request, "error": "", "curve": _packed(points)}
         # Samples per non-empty knot span: the browser finds the part of the curve that the
         # selected control point acts on from it.
@@ -354,7 +369,7 @@ class PointsEditor(_AbstractEditor):
         self._drawn = None
         self._started = time.perf_counter()
         self._lines = self._lines_of(points)  # a bad start raises here, before any display
-        self._accepted = {"control_points": _listed(points)}
+        self._accepted = {"control_points": _exact(points)}
         super().__init__(mode="points", points=points, state=self._accepted, show={}, **kwargs)
         self._draw()
 

@@ -10,6 +10,7 @@ const PAD = 14;
 // Edits sent ahead of the drawings: the round trip through Jupyter is several times the
 // kernel's work per edit, so a few requests in flight keep it busy without a backlog.
 const MAX_INFLIGHT = 3;
+const MEASURED = 1000;
 const COLORS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
   "#7f7f7f", "#bcbd22", "#17becf"];
 
@@ -141,11 +142,19 @@ function render({ model, el }) {
   let waiting = []; // pointer-event times of the edits the next drawing will show
   const sentWith = new Map(); // request id -> event times it carries
   const sentAt = new Map(); // request id -> when it was sent
-  const latencies = [];
-  const roundTrips = []; // sent -> drawn, kernel and transport included
-  const drawTimes = []; // time spent redrawing in the browser
-  const kernelTimes = []; // the kernel's work per drawing
-  root.dataset.latencies = "[]";
+  // Timings in ms, the last MEASURED of each: pointer event -> redrawn (latencies), sent ->
+  // drawn (roundTrips, kernel and transport), the kernel's work (kernelTimes) and the
+  // browser's redraw (drawTimes). Readable as data-* attributes once no edit is pending.
+  const measured = { latencies: [], roundTrips: [], drawTimes: [], kernelTimes: [] };
+  function measure(name, value) {
+    const values = measured[name];
+    values.push(Math.round(value * 10) / 10);
+    if (values.length > MEASURED) values.shift();
+  }
+  function publishMeasures() {
+    for (const [name, values] of Object.entries(measured)) root.dataset[name] = JSON.stringify(values);
+  }
+  publishMeasures();
   root.dataset.redraws = "0";
   root.dataset.pending = "0";
 
@@ -460,26 +469,22 @@ function render({ model, el }) {
     const start = performance.now();
     drawCurve();
     const done = performance.now();
-    drawTimes.push(done - start);
-    kernelTimes.push(drawing.kernel_ms);
-    root.dataset.kernelTimes = JSON.stringify(kernelTimes.map((x) => Math.round(x * 10) / 10));
+    measure("drawTimes", done - start);
+    measure("kernelTimes", drawing.kernel_ms);
     if (sentAt.has(drawing.request)) {
-      roundTrips.push(done - sentAt.get(drawing.request));
+      measure("roundTrips", done - sentAt.get(drawing.request));
       sentAt.delete(drawing.request);
     }
-    root.dataset.roundTrips = JSON.stringify(roundTrips.map((x) => Math.round(x * 10) / 10));
-    root.dataset.drawTimes = JSON.stringify(drawTimes.map((x) => Math.round(x * 10) / 10));
     root.dataset.redraws = String(Number(root.dataset.redraws) + 1);
     // ipywidgets merges edits queued behind a busy kernel into one message: a drawing
     // answers its own request and every earlier one.
     const answered = [...sentWith.keys()].filter((id) => id <= drawing.request);
     if (answered.length) {
       for (const id of answered) {
-        for (const t of sentWith.get(id)) latencies.push(done - t);
+        for (const t of sentWith.get(id)) measure("latencies", done - t);
         sentWith.delete(id);
         sentAt.delete(id);
       }
-      root.dataset.latencies = JSON.stringify(latencies.map((x) => Math.round(x * 10) / 10));
       inflight -= answered.length;
       if (drawing.error && inflight === 0) {
         // The kernel refused the edit: go back to the last curve it accepted.
@@ -487,7 +492,10 @@ function render({ model, el }) {
         drawPoints();
       }
       if (dirty) send();
-      else if (inflight === 0) root.dataset.pending = "0";
+      else if (inflight === 0) {
+        publishMeasures();
+        root.dataset.pending = "0";
+      }
     }
   }
   function onU() {

@@ -123,6 +123,16 @@ def run_all(page) -> None:
     )
 
 
+def save(page) -> None:
+    """Save the open notebook (File > Save Notebook) and wait until the tab is clean."""
+    page.locator("#jp-MainMenu").get_by_text("File", exact=True).click()
+    page.get_by_text("Save Notebook", exact=True).first.click()
+    page.wait_for_function(
+        "() => !document.querySelector('.lm-TabBar-tab.jp-mod-current.jp-mod-dirty')",
+        timeout=60_000,
+    )
+
+
 def error_outputs(page) -> list[str]:
     """Texts of error and warning (stderr) outputs shown in the notebook."""
     return page.eval_on_selector_all(

@@ -11,6 +11,15 @@ os.environ.setdefault(
 # Every program, however quick to compile: each notebook runs in a fresh kernel, which would
 # otherwise compile again the hundreds of small programs that eager JAX code dispatches.
 os.environ.setdefault("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS", "0")
+# XLA's compiler, not the programs, takes most of the suite's time: test inputs are small, and
+# a program compiled for them runs once or a few times. The unoptimised LLVM back end and the
+# older elemental emitters compile 2-3x faster (closest point on a sweep: 25 s -> 11 s). The
+# results agree to rounding (a few ulps: the order of operations and fused multiply-adds
+# differ); only the compiled code is slower, which `make bench`, run without these flags,
+# measures.
+os.environ.setdefault(
+    "XLA_FLAGS", "--xla_backend_optimization_level=0 --xla_cpu_use_fusion_emitters=false"
+)
 
 import jax
 import pytest

@@ -31,6 +31,11 @@ LAYOUT = dc.CourseLayout(ROOT)
 
 TIMES_TABLE = LAYOUT.build / "notebook_times.md"
 
+WIDGET_CHAPTERS = [p for p in dc.notebooks(LAYOUT.course) if "dn.widgets." in p.read_text()]
+"""The chapters with editors. `test_browser.py` runs them in JupyterLab in Chromium and checks
+the saved notebook as `test_notebooks.py` checks the others: one run each, the way students
+meet them, and not a second headless one."""
+
 
 def shared_dir(tmp_path_factory) -> Path:
     """A folder shared by every worker of this pytest run (and only this run).
@@ -99,7 +104,7 @@ def record_time(shared: Path, path: Path, seconds: float, how: str) -> None:
     - `shared`: `shared_dir(...)`.
     - `path`: the notebook.
     - `seconds`: its wall time, kernel start-up included.
-    - `how`: `"executed"` or `"graded"` (graded runs include the tests).
+    - `how`: `"executed"`, `"graded"` (graded runs include the tests) or `"browser"`.
     """
     rows = shared / "times"
     rows.mkdir(exist_ok=True)

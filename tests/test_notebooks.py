@@ -1,7 +1,8 @@
 """Every notebook of the course runs top to bottom; notebooks are committed without outputs.
 
 Parametrized over the globs, so chapters written later are picked up. One kernel per notebook:
-course notebooks are executed here; masters and exercises are executed by their grading run
+course notebooks are executed here, except those with editors, which `test_browser.py` runs in
+JupyterLab; masters and exercises are executed by their grading run
 (`notebook_runs.graded`), which `test_grading.py` reuses for the scores.
 
 Exercises: the student version has `...` where answers go, so an answer cell, or a later cell
@@ -18,7 +19,15 @@ from pathlib import Path
 
 import nbformat
 import pytest
-from notebook_runs import LAYOUT, ROOT, answered, graded, record_time, shared_dir
+from notebook_runs import (
+    LAYOUT,
+    ROOT,
+    WIDGET_CHAPTERS,
+    answered,
+    graded,
+    record_time,
+    shared_dir,
+)
 
 import diffnurbs_course as dc
 
@@ -39,7 +48,7 @@ def test_committed_without_outputs(path):
     assert not problems, f"{_id(path)}: {problems}; run `.venv/bin/python tools/nbclean.py`"
 
 
-@pytest.mark.parametrize("path", COURSE, ids=_id)
+@pytest.mark.parametrize("path", [p for p in COURSE if p not in WIDGET_CHAPTERS], ids=_id)
 def test_course_notebook_runs_and_draws(path, tmp_path, tmp_path_factory):
     nb = dc.read_notebook(path)
     seconds = dc.execute_notebook(nb, tmp_path, timeout=900)

@@ -8,7 +8,7 @@ STAMP := $(VENV)/.installed
 export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 export PYVISTA_OFF_SCREEN ?= true
 
-.PHONY: install lab test bench html exercises lint clean system-libs
+.PHONY: install lab test bench html exercises lint clean system-libs widgets
 
 install: $(STAMP) system-libs
 
@@ -49,6 +49,16 @@ html: install
 exercises: install
 	$(BIN)/python tools/make_exercises.py --solutions solutions --exercises exercises --build build/otter
 	$(BIN)/python tools/make_exercises.py --solutions tests/data/solutions --exercises tests/data/exercises --build build/otter
+
+# The 3D view's front end, bundled with three.js (needs Node; the bundle is committed, so
+# `make install` does not). Its first line records the source's hash, which a test checks.
+WIDGETS := tools/widgets
+widgets:
+	cd $(WIDGETS) && npm ci --silent
+	hash=$$(sha256sum $(WIDGETS)/surface_view.js | cut -d' ' -f1); \
+	$(WIDGETS)/node_modules/.bin/esbuild $(WIDGETS)/surface_view.js --bundle --format=esm \
+		--minify --legal-comments=eof --outfile=src/diffnurbs/_static/surface_view.js \
+		--banner:js="// Bundled by make widgets from tools/widgets/surface_view.js (sha256 $$hash) with three.js (MIT)."
 
 lint: install
 	$(BIN)/ruff check src tests bench

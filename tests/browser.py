@@ -34,6 +34,11 @@ CHROMIUM_ARGS = [
     "--disable-background-networking",
     "--disable-component-update",
     "--disable-sync",
+    # WebGL (the 3D views) without a GPU: Chromium's software renderer, which it no longer
+    # falls back to by itself.
+    "--enable-unsafe-swiftshader",
+    # `window.gc()`, so that the memory test measures what is live, not what awaits collection.
+    "--js-flags=--expose-gc",
 ]
 
 
@@ -140,6 +145,20 @@ def error_outputs(page) -> list[str]:
         ".jp-RenderedText[data-mime-type='application/vnd.jupyter.stderr']",
         "nodes => nodes.map(n => n.textContent)",
     )
+
+
+def settled_view(page, view, timeout_s: float = 60) -> int:
+    """Wait until a 3D view (`.dn-view` locator) has drawn no new update for half a second;
+    return how many updates it has drawn."""
+    deadline = time.monotonic() + timeout_s
+    last = view.get_attribute("data-updates")
+    while time.monotonic() < deadline:
+        page.wait_for_timeout(500)
+        now = view.get_attribute("data-updates")
+        if now == last:
+            return int(now)
+        last = now
+    raise PlaywrightTimeout(f"the 3D view kept redrawing for {timeout_s} s")
 
 
 def drag(page, handle, dx: float, dy: float, steps: int = 5, pause_ms: float = 0) -> None:

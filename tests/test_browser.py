@@ -21,6 +21,7 @@ from browser import (
     jupyter_lab,
     run_all,
     save,
+    settled_view,
     wait_for_idle_kernel,
 )
 from notebook_runs import WIDGET_CHAPTERS, record_time, shared_dir
@@ -183,8 +184,9 @@ def test_chapter_runs_and_its_editors_answer_a_drag(lab, chapter, tmp_path_facto
     assert not error_outputs(page)
     save(page)
     check_saved_run(root / "course" / chapter.name)
-    editors = page.locator(".dn-editor")
+    editors, views = page.locator(".dn-editor"), page.locator(".dn-view canvas")
     assert editors.count() >= 1
+    pictures = [views.nth(k).screenshot() for k in range(views.count())]
     for index in range(editors.count()):
         editor = editors.nth(index)
         before = _drawn_lines(editor)
@@ -197,5 +199,76 @@ def test_chapter_runs_and_its_editors_answer_a_drag(lab, chapter, tmp_path_facto
         assert _drawn_lines(editor) != before
         name = f"{chapter.stem}_editor{index}"
         assert len(record_latencies(editor, f"{chapter.stem}, editor {index}", name)) == 60
+    # A 3D view follows the editor that drives it.
+    for k, before in enumerate(pictures):
+        settled_view(page, page.locator(".dn-view").nth(k))
+        views.nth(k).screenshot(path=BROWSER_OUT / f"{chapter.stem}_view{k}.png")
+        assert views.nth(k).screenshot() != before, f"3D view {k} did not change"
+    assert not page.console_errors, [m.text for m in page.console_errors]
+    page.close()
+
+
+MOTION_CELL = """\
+import jax
+import numpy as np
+
+jax.config.update("jax_enable_x64", True)
+import diffnurbs as dn
+
+vase = np.array([[0.9, 0.0], [1.4, 0.4], [1.5, 1.2], [0.7, 1.8], [0.8, 2.6], [1.1, 3.0]])
+motion = dn.widgets.MotionEditor(dn.NURBSCurve(vase, 3))
+motion"""
+
+
+def js_heap_mb(page) -> float:
+    return page.evaluate("() => { window.gc(); return performance.memory.usedJSHeapSize / 2**20; }")
+
+
+def test_motion_editor_keeps_its_camera_and_its_memory_over_400_updates(lab):
+    open_notebook, root = lab
+    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(MOTION_CELL)]))
+    nbformat.write(nb, root / "motion.ipynb")
+    page = open_notebook("motion.ipynb")
+    run_all(page)
+    view, canvas = page.locator(".dn-view"), page.locator(".dn-view canvas")
+    view.wait_for(timeout=120_000)
+    assert view.get_attribute("data-error") is None, "no WebGL"
+    settled_view(page, view)
+    # Turn the camera by hand: the updates that follow must leave it there.
+    camera = view.get_attribute("data-camera")
+    drag(page, canvas, 120, 40, steps=10)
+    turned = view.get_attribute("data-camera")
+    assert turned != camera
+    geometries, heap = view.get_attribute("data-geometries"), js_heap_mb(page)
+    drawn = settled_view(page, view)
+    # Profile edits, back and forth, 100 at a time (60 pointer events per second); the
+    # memory is read after each hundred.
+    point = page.locator(".dn-editor .dn-point").nth(2)
+    rows = [("before the edits", 0, geometries, heap)]
+    for hundred in range(1, 5):
+        drag(page, point, 40 * (-1) ** hundred, -30 * (-1) ** hundred, steps=100, pause_ms=16)
+        page.wait_for_selector(".dn-editor[data-pending='0']", timeout=60_000)
+        updates = settled_view(page, view) - drawn
+        rows.append(
+            (
+                f"after {100 * hundred} edits",
+                updates,
+                view.get_attribute("data-geometries"),
+                js_heap_mb(page),
+            )
+        )
+    canvas.screenshot(path=BROWSER_OUT / "motion_editor_after_400_edits.png")
+    page.screenshot(path=BROWSER_OUT / "motion_editor.png")
+    assert view.get_attribute("data-camera") == turned
+    (BROWSER_OUT / "memory_motion_editor_browser.md").write_text(
+        "| MotionEditor, browser | updates drawn | three.js geometries | JS heap MB (after GC) |\n"
+        "|---|---|---|---|\n"
+        + "".join(f"| {name} | {count} | {kept} | {mb:.1f} |\n" for name, count, kept, mb in rows)
+    )
+    assert all(kept == geometries for _, _, kept, _ in rows), rows
+    assert rows[-1][1] >= 100, "the 3D view must follow the drag"
+    # Flat: the last 200 edits leave the heap where the first 200 brought it.
+    assert rows[-1][3] - rows[2][3] < 5, rows
+    assert not error_outputs(page)
     assert not page.console_errors, [m.text for m in page.console_errors]
     page.close()

@@ -1,16 +1,24 @@
-"""The curve editor's kernel side: what it sends to draw is what the library computes.
+"""The widgets' kernel side: what they send to draw is what the library computes.
 
 The browser side (dragging in JupyterLab, latency) is tested in `test_browser.py`.
 """
 
+import gc
+import hashlib
 import itertools
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 from helpers import random_curve
 
 import diffnurbs as dn
-from diffnurbs.widgets import CurveEditor, PointsEditor
+from diffnurbs.widgets import CurveEditor, MotionEditor, PointsEditor, SurfaceView
+
+MEMORY_TABLE = (
+    Path(__file__).resolve().parents[1] / "build" / "browser" / "memory_motion_editor_kernel.md"
+)
 
 
 def browser_edit(editor, **state):
@@ -156,3 +164,167 @@ def test_points_editor_bad_arguments():
         PointsEditor([[0, 0]], lambda points: points)
     with pytest.raises(ValueError, match=r"'x' must have shape \(m, 2\), got \(3,\)"):
         PointsEditor([[0, 0]], lambda points: {"x": [1, 2, 3]})
+
+
+def floats(data):
+    """The browser's reading of a 3D buffer: little-endian float32 (x, y, z) triples."""
+    return np.frombuffer(data, dtype="<f4").reshape(-1, 3)
+
+
+def test_surface_view_sends_the_librarys_samples():
+    surface = dn.NURBSSurface(np.random.default_rng(0).normal(size=(5, 4, 3)), (3, 2))
+    view = SurfaceView(caption="a patch")
+    view.surface("patch", surface, samples=(7, 5), net=True)
+    item = view.items["patch"]
+    assert item["shape"] == [7, 5]
+    expected = np.asarray(surface.grid(np.linspace(0, 1, 7), np.linspace(0, 1, 5))).reshape(-1, 3)
+    np.testing.assert_allclose(floats(item["positions"]), expected, rtol=1e-6, atol=1e-6)
+    net = view.items["patch net"]
+    assert net["shape"] == [5, 4]
+    np.testing.assert_allclose(floats(net["positions"]), surface.control_points.reshape(-1, 3))
+    # A planar curve lies in z = 0; a polyline is drawn as given.
+    curve = random_curve(np.random.default_rng(1), 3, n_control=6)
+    view.curve("c", curve, samples=9)
+    drawn = floats(view.items["c"]["positions"])
+    np.testing.assert_allclose(drawn[:, :2], np.asarray(curve(np.linspace(0, 1, 9))), atol=1e-6)
+    assert not drawn[:, 2].any()
+    view.curve("line", [[0, 0, 0], [1, 2, 3]])
+    view.points("dots", np.eye(3))
+    assert view.items["dots"]["count"] == 3
+    view.remove("c", "line")
+    assert set(view.items) == {"patch", "patch net", "dots"}
+    assert view.picture().startswith(b"\x89PNG")
+
+
+def test_surface_view_bad_arguments():
+    view = SurfaceView()
+    surface = dn.NURBSSurface(np.zeros((3, 3, 3)), (2, 2))
+    with pytest.raises(ValueError, match="AbstractSurface"):
+        view.surface("s", np.zeros((3, 3, 3)))
+    with pytest.raises(ValueError, match="at least"):
+        view.surface("s", surface, samples=(1, 5))
+    corners = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    sides = [(0, 1), (2, 3), (0, 2), (1, 3)]  # c0, c1, d0, d1 of a unit square
+    coons = dn.CoonsPatch(*(dn.NURBSCurve(corners[list(side)], 1) for side in sides))
+    with pytest.raises(ValueError, match="control net"):
+        view.surface("s", coons, net=True)
+    with pytest.raises(ValueError, match="2D or 3D"):
+        view.points("p", np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="count >= 2"):
+        view.curve("c", np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="non-zero 3-vector"):
+        SurfaceView(direction=(0, 0, 0))
+
+
+VASE = dn.NURBSCurve(np.array([[0.9, 0.0], [1.4, 0.4], [1.5, 1.2], [0.7, 1.8], [1.1, 3.0]]), 3)
+
+
+def upright(curve):
+    points = np.asarray(curve.control_points)
+    space = np.column_stack([points[:, 0], np.zeros(len(points)), points[:, 1]])
+    return dn.NURBSCurve(space, curve.degree, curve.knots, curve.weights)
+
+
+@pytest.mark.parametrize(
+    "operation, values",
+    [
+        ("extrude", [1.5, 20.0]),
+        ("revolve", [270.0, 0.3]),
+        ("sweep", []),
+        ("kinematic sweep", ["rmf"]),
+    ],
+)
+def test_motion_editor_shows_the_librarys_surface(operation, values):
+    editor = MotionEditor(VASE, operation=operation, samples=(9, 8))
+    for control, value in zip(editor.parameters[operation], values, strict=True):
+        control.value = value
+    tilt = np.radians(20.0)
+    expected = {
+        "extrude": lambda: dn.extrude(upright(VASE), [np.sin(tilt), np.cos(tilt), 0.0], 1.5),
+        "revolve": lambda: dn.revolve(upright(VASE), [0.3, 0, 0], [0, 0, 1], np.radians(270)),
+        "sweep": lambda: dn.sweep(upright(VASE), editor.path),
+        "kinematic sweep": lambda: dn.KinematicSweep(VASE, editor.path, "rmf"),
+    }[operation]()
+    uv = np.linspace(0.0, 1.0, 5)
+    np.testing.assert_array_equal(editor.surface.grid(uv, uv), expected.grid(uv, uv))
+    (u0, u1), (v0, v1) = expected.domain
+    grid = expected.grid(np.linspace(u0, u1, 9), np.linspace(v0, v1, 8))
+    drawn = floats(editor.view.items["surface"]["positions"])
+    np.testing.assert_allclose(drawn, np.asarray(grid).reshape(-1, 3), rtol=1e-6, atol=1e-6)
+    # The profile drawn is where the motion starts, S(u, v_min).
+    start = np.asarray(expected.grid(np.linspace(u0, u1, 200), np.asarray([v0])))[:, 0]
+    np.testing.assert_allclose(floats(editor.view.items["profile"]["positions"]), start, atol=1e-6)
+    assert ("path" in editor.view.items) == ("sweep" in operation)
+    # The control net is drawn for the exact NURBS surfaces, and goes when the surface is not one.
+    assert ("surface net" in editor.view.items) == (operation != "kinematic sweep")
+    editor.choice.value = "revolve" if operation == "kinematic sweep" else "kinematic sweep"
+    assert ("surface net" in editor.view.items) == (operation == "kinematic sweep")
+
+
+def test_motion_editor_follows_the_profile_and_exports(tmp_path):
+    editor = MotionEditor(VASE, samples=(9, 8))
+    items = editor.view.items
+    moved = np.asarray(VASE.control_points).copy()
+    moved[2, 0] += 0.25
+    editor.profile.curve = dn.NURBSCurve(moved, 3)
+    assert editor.view.items["surface"] is not items["surface"]
+    expected = dn.revolve(upright(editor.profile.curve), [0, 0, 0], [0, 0, 1])
+    uv = np.linspace(0.0, 1.0, 5)
+    np.testing.assert_array_equal(editor.surface.grid(uv, uv), expected.grid(uv, uv))
+    pv = pytest.importorskip("pyvista")
+    mesh = dn.io.tessellate([editor.surface], samples=(9, 8))
+    for suffix in ("stl", "obj", "vtk"):
+        written = pv.read(editor.export(tmp_path / f"vase.{suffix}"))
+        assert written.n_cells == mesh.n_cells
+        np.testing.assert_allclose(written.bounds, mesh.bounds, rtol=1e-6)
+    with pytest.raises(ValueError, match="stl, obj, vtk"):
+        editor.export(tmp_path / "vase.step")
+
+
+def test_motion_editor_bad_arguments():
+    with pytest.raises(ValueError, match="operation must be one of"):
+        MotionEditor(VASE, operation="loft")
+    with pytest.raises(ValueError, match="path must be a NURBSCurve in 3D"):
+        MotionEditor(VASE, path=VASE)
+    with pytest.raises(ValueError, match="CurveEditor edits planar curves"):
+        MotionEditor(upright(VASE))
+
+
+def resident_megabytes() -> float:
+    with open("/proc/self/statm") as statm:
+        return int(statm.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def test_motion_editor_memory_stays_flat_over_200_updates():
+    # The pyvista tools this editor replaces kept a new plotter per update (~39 MB each).
+    editor = MotionEditor(VASE)
+    rng = np.random.default_rng(2)
+
+    def update():
+        points = np.asarray(VASE.control_points) + 0.05 * rng.normal(size=(5, 2))
+        editor.profile.curve = dn.NURBSCurve(points, 3)
+
+    for _ in range(20):  # compiled programs and caches settle first
+        update()
+    gc.collect()
+    before = resident_megabytes()
+    for _ in range(200):
+        update()
+    gc.collect()
+    after = resident_megabytes()
+    MEMORY_TABLE.parent.mkdir(parents=True, exist_ok=True)
+    MEMORY_TABLE.write_text(
+        "| MotionEditor, kernel | resident MB |\n|---|---|\n"
+        f"| after 20 updates | {before:.0f} |\n| after 200 more | {after:.0f} |\n"
+    )
+    assert after - before < 20, (before, after)
+
+
+def test_3d_front_end_bundle_is_built_from_its_source():
+    # `make widgets` bundles tools/widgets/surface_view.js with three.js and records the
+    # source's hash in the bundle's first line: an edit without a rebuild fails here.
+    root = Path(__file__).resolve().parents[1]
+    source = (root / "tools" / "widgets" / "surface_view.js").read_bytes()
+    bundle = root / "src" / "diffnurbs" / "_static" / "surface_view.js"
+    first_line = bundle.read_text().splitlines()[0]
+    assert f"sha256 {hashlib.sha256(source).hexdigest()}" in first_line, "run `make widgets`"

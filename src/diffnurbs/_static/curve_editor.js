@@ -2,8 +2,6 @@
 // The kernel evaluates every curve (one source of truth); the browser only moves control
 // points, knots and weights, and redraws the control polygon at once while it waits.
 const SVG = "http://www.w3.org/2000/svg";
-const WIDTH = 560;
-const HEIGHT = 400;
 const STRIP = 46; // knot strip: knots and the construction parameter
 const PANEL = 110; // basis functions
 const PAD = 14;
@@ -84,6 +82,8 @@ function render({ model, el }) {
   bar.appendChild(weightBox);
   // "points": a PointsEditor, which drags points and draws the kernel's labelled lines.
   const pointsMode = model.get("mode") === "points";
+  const WIDTH = model.get("width");
+  const HEIGHT = model.get("height");
   if (pointsMode) bar.style.display = "none";
   const legend = document.createElement("div");
   legend.className = "dn-legend";

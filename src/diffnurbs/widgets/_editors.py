@@ -1,8 +1,5 @@
-"""Jupyter widgets for editing curves by direct manipulation (anywidget; imported on first use).
-
-The browser draws and reports edits; the kernel evaluates every curve with the library, so
-what the widget shows is exactly what `editor.curve` computes.
-"""
+"""The 2D editors: the browser draws and reports edits; the kernel evaluates every curve
+with the library, so what the widget shows is exactly what `editor.curve` computes."""
 
 import abc
 import io
@@ -18,12 +15,12 @@ import numpy as np
 import traitlets
 from jaxtyping import ArrayLike
 
-from ._basis import basis_matrix
-from ._curve import NURBSCurve
-from ._deboor import de_boor_levels
-from ._misc import safe_divide
+from .._basis import basis_matrix
+from .._curve import NURBSCurve
+from .._deboor import de_boor_levels
+from .._misc import safe_divide
 
-_STATIC = pathlib.Path(__file__).parent / "_static"
+STATIC = pathlib.Path(__file__).parents[1] / "_static"
 # Curve points drawn: enough for a smooth curve on screen, few enough to send at every move.
 _SAMPLES = 1200
 # Digits sent to the browser: a thousandth of a pixel on any sensible view.
@@ -114,21 +111,36 @@ def _basis_rows(curve: NURBSCurve, u: np.ndarray) -> list:
     return rows
 
 
-class _EditorMeta(type(anywidget.AnyWidget), abc.ABCMeta):
+class _WidgetMeta(type(anywidget.AnyWidget), abc.ABCMeta):
     """traitlets' metaclass with abstract methods enforced."""
 
 
-class _AbstractEditor(anywidget.AnyWidget, metaclass=_EditorMeta):
-    """What the editors share: the browser edits `state` and numbers each edit (`request`);
-    the kernel accepts or refuses it (`_accept`) and answers with one `drawing` per edit.
-    Displayed outside a live Jupyter front end (nbconvert, a static site), an editor shows
-    a picture of its state (`picture`)."""
+class Pictured(metaclass=_WidgetMeta):
+    """Mixin of a widget that shows a picture of its state where it cannot run (nbconvert,
+    a static site): its display carries a PNG beside the widget view. Put it first among
+    the bases, before the widget class."""
 
-    _esm = _STATIC / "curve_editor.js"
-    _css = _STATIC / "curve_editor.css"
+    @abc.abstractmethod
+    def picture(self) -> bytes:
+        """A PNG of what the widget draws now, for pages where it cannot run."""
+
+    def _repr_mimebundle_(self, **kwargs):
+        bundle = super()._repr_mimebundle_(**kwargs)
+        data, metadata = bundle if isinstance(bundle, tuple) else (bundle, {})
+        return {**data, "image/png": self.picture()}, metadata
+
+
+class _AbstractEditor(Pictured, anywidget.AnyWidget):
+    """What the editors share: the browser edits `state` and numbers each edit (`request`);
+    the kernel accepts or refuses it (`_accept`) and answers with one `drawing` per edit."""
+
+    _esm = STATIC / "curve_editor.js"
+    _css = STATIC / "curve_editor.css"
 
     # Synchronised with the browser: what it edits ...
     mode = traitlets.Unicode("curve").tag(sync=True)
+    width = traitlets.Int(560).tag(sync=True)  # of the plot, in pixels
+    height = traitlets.Int(400).tag(sync=True)
     state = traitlets.Dict().tag(sync=True)
     u = traitlets.Float(0.5).tag(sync=True)
     show = traitlets.Dict().tag(sync=True)
@@ -143,10 +155,6 @@ class _AbstractEditor(anywidget.AnyWidget, metaclass=_EditorMeta):
     @abc.abstractmethod
     def _draw(self) -> None:
         """Evaluate what the browser draws and set `drawing`, once per state."""
-
-    @abc.abstractmethod
-    def picture(self) -> bytes:
-        """A PNG of what the editor draws now, for pages where it cannot run."""
 
     @traitlets.observe("state", "request", "u", "show")
     def _browser_changed(self, change):
@@ -168,20 +176,15 @@ class _AbstractEditor(anywidget.AnyWidget, metaclass=_EditorMeta):
         drawing["kernel_ms"] = 1e3 * (time.perf_counter() - self._started)
         self.drawing = drawing
 
-    def _repr_mimebundle_(self, **kwargs):
-        bundle = super()._repr_mimebundle_(**kwargs)
-        data, metadata = bundle if isinstance(bundle, tuple) else (bundle, {})
-        return {**data, "image/png": self.picture()}, metadata
 
-
-def _png(figure) -> bytes:
+def png(figure) -> bytes:
     figure.tight_layout()
     buffer = io.BytesIO()
     figure.savefig(buffer, format="png")
     return buffer.getvalue()
 
 
-def _figure(size):
+def figure_of(size):
     import matplotlib
 
     matplotlib.use("Agg", force=False)
@@ -229,7 +232,8 @@ class CurveEditor(_AbstractEditor):
           switched in the widget).
         - `samples_per_span`: curve points per knot span; None gives 24, fewer on long
           curves (about 1200 points in all, at least 4 per span).
-        - `kwargs`: passed to `anywidget.AnyWidget`.
+        - `kwargs`: passed to `anywidget.AnyWidget`; `width` and `height` size the plot
+          (pixels, default 560 x 400).
         """
         if not isinstance(curve, NURBSCurve):
             raise ValueError(f"CurveEditor edits a NURBSCurve, got {type(curve).__name__}")
@@ -309,7 +313,7 @@ class CurveEditor(_AbstractEditor):
 
         drawing, show = self.drawing, self.show
         rows = 2 if show.get("basis") else 1
-        figure = _figure((6, 5.2 if rows == 2 else 4))
+        figure = figure_of((6, 5.2 if rows == 2 else 4))
         grid = figure.add_gridspec(rows, 1, height_ratios=[3, 1][:rows])
         ax = figure.add_subplot(grid[0])
         curve = _unpacked(drawing["curve"])
@@ -337,7 +341,7 @@ class CurveEditor(_AbstractEditor):
             knots = np.asarray(self.curve.knots)
             panel.plot(knots, np.zeros_like(knots), "k|", ms=10)
             panel.set_xlabel("$u$")
-        return _png(figure)
+        return png(figure)
 
 
 @typing.final
@@ -358,7 +362,8 @@ class PointsEditor(_AbstractEditor):
 
         - `points`: the starting points, shape `(count, 2)`.
         - `draw`: the function from points to labelled polylines (see the class).
-        - `kwargs`: passed to `anywidget.AnyWidget`.
+        - `kwargs`: passed to `anywidget.AnyWidget`; `width` and `height` size the plot
+          (pixels, default 560 x 400).
         """
         points = np.array(points, dtype=float)
         if points.ndim != 2 or points.shape[1] != 2 or len(points) == 0:
@@ -402,7 +407,7 @@ class PointsEditor(_AbstractEditor):
         self._publish({"request": self.request, "error": "", "lines": lines})
 
     def picture(self) -> bytes:
-        figure = _figure((6, 4.5))
+        figure = figure_of((6, 4.5))
         ax = figure.add_subplot()
         points = np.asarray(self.points)
         for label, line in self._lines.items():
@@ -411,4 +416,4 @@ class PointsEditor(_AbstractEditor):
         ax.set_aspect("equal", adjustable="datalim")
         ax.legend(fontsize=8)
         ax.set_title("interactive in JupyterLab: drag the points", fontsize=9)
-        return _png(figure)
+        return png(figure)

@@ -115,6 +115,8 @@ def test_widget_front_end_ships_in_the_wheel(installed, tmp_path):
         "import diffnurbs as dn, numpy as np\n"
         "editor = dn.widgets.CurveEditor(dn.NURBSCurve(np.eye(4, 2), 3))\n"
         "assert 'export default' in editor._esm and '.dn-editor' in editor._css\n"
+        "view = dn.widgets.SurfaceView()\n"
+        "assert 'WebGLRenderer' in view._esm and '.dn-view' in view._css\n"
         "print(dn.widgets.__file__)\n"
     )
     installed.assert_loads_from_wheel(code, "diffnurbs", tmp_path)

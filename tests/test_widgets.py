@@ -5,6 +5,7 @@ The browser side (dragging in JupyterLab, latency) is tested in `test_browser.py
 
 import gc
 import hashlib
+import io
 import itertools
 import os
 from pathlib import Path
@@ -14,7 +15,7 @@ import pytest
 from helpers import random_curve
 
 import diffnurbs as dn
-from diffnurbs.widgets import CurveEditor, MotionEditor, PointsEditor, SurfaceView
+from diffnurbs.widgets import CurveEditor, MotionEditor, PointsEditor, Raster, SurfaceView
 
 MEMORY_TABLE = (
     Path(__file__).resolve().parents[1] / "build" / "browser" / "memory_motion_editor_kernel.md"
@@ -328,3 +329,35 @@ def test_3d_front_end_bundle_is_built_from_its_source():
     bundle = root / "src" / "diffnurbs" / "_static" / "surface_view.js"
     first_line = bundle.read_text().splitlines()[0]
     assert f"sha256 {hashlib.sha256(source).hexdigest()}" in first_line, "run `make widgets`"
+
+
+def test_points_editor_draws_a_raster_under_its_lines():
+    from PIL import Image
+
+    pixels = np.random.default_rng(5).uniform(size=(6, 8, 3))
+
+    def draw(points):
+        return {"image": Raster(pixels * points[0, 0], (0, 2, 0, 1)), "polygon": points}
+
+    editor = PointsEditor([[1.0, 0.0], [0.5, 0.5]], draw)
+    image = editor.drawing["image"]
+    assert image["extent"] == [0.0, 2.0, 0.0, 1.0]
+    assert [line["label"] for line in editor.drawing["lines"]] == ["polygon"]
+    decoded = np.asarray(Image.open(io.BytesIO(image["png"])))
+    np.testing.assert_array_equal(decoded, np.round(255 * pixels).astype(np.uint8))
+    browser_edit(editor, control_points=[[0.5, 0.0], [0.5, 0.5]])
+    decoded = np.asarray(Image.open(io.BytesIO(editor.drawing["image"]["png"])))
+    np.testing.assert_array_equal(decoded, np.round(255 * 0.5 * pixels).astype(np.uint8))
+    assert editor.picture().startswith(b"\x89PNG")
+
+
+def test_raster_bad_arguments():
+    with pytest.raises(ValueError, match="pixels"):
+        Raster(np.zeros((4, 4, 2)))
+    with pytest.raises(ValueError, match="extent"):
+        Raster(np.zeros((4, 4)), (0, 1))
+    with pytest.raises(ValueError, match="one Raster at most"):
+        PointsEditor(
+            np.zeros((2, 2)),
+            lambda p: {"a": Raster(np.zeros((2, 2))), "b": Raster(np.zeros((2, 2)))},
+        )

@@ -277,8 +277,33 @@ function render({ model, el }) {
     marker.setAttribute("transform", `translate(${stripX(uValue)}, 0)`);
   }
 
+  // A raster under the lines (PointsEditor with a `Raster`): PNG bytes shown through a blob
+  // URL, the previous URL released when the next one replaces it.
+  let raster = null;
+  let rasterUrl = null;
+  function drawRaster(image) {
+    if (!image) {
+      if (raster) raster.remove();
+      raster = null;
+      return;
+    }
+    if (!raster) {
+      raster = node("image", { preserveAspectRatio: "none", class: "dn-raster" });
+      svg.insertBefore(raster, svg.childNodes[1]); // above the plot's background only
+    }
+    const [x0, x1, y0, y1] = image.extent;
+    const [left, top] = toScreen([x0, y1]);
+    const [right, bottom] = toScreen([x1, y0]);
+    const url = URL.createObjectURL(new Blob([image.png], { type: "image/png" }));
+    Object.entries({ x: left, y: top, width: right - left, height: bottom - top, href: url })
+      .forEach(([key, value]) => raster.setAttribute(key, value));
+    if (rasterUrl) URL.revokeObjectURL(rasterUrl);
+    rasterUrl = url;
+  }
+
   function drawLines(drawing) {
     if (!drawing.lines) return;
+    drawRaster(drawing.image);
     lineGroup.replaceChildren();
     legend.replaceChildren();
     drawing.lines.forEach(({ label, data }, i) => {
@@ -516,7 +541,12 @@ function render({ model, el }) {
   model.on("change:u", onU);
 
   // A points editor frames its lines too: what the kernel draws may reach beyond the points.
-  const lines = pointsMode ? (model.get("drawing").lines || []).flatMap(({ data }) => pairs(data)) : [];
+  const first = model.get("drawing");
+  const lines = pointsMode ? (first.lines || []).flatMap(({ data }) => pairs(data)) : [];
+  if (pointsMode && first.image) {
+    const [x0, x1, y0, y1] = first.image.extent;
+    lines.push([x0, y0], [x1, y1]);
+  }
   fit([...state.control_points, ...lines]);
   drawPoints();
   drawCurve();
@@ -524,6 +554,7 @@ function render({ model, el }) {
     model.off("change:drawing", onDrawing);
     model.off("change:state", onState);
     model.off("change:u", onU);
+    if (rasterUrl) URL.revokeObjectURL(rasterUrl);
   };
 }
 

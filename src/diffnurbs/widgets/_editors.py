@@ -2,6 +2,7 @@
 with the library, so what the widget shows is exactly what `editor.curve` computes."""
 
 import abc
+import dataclasses
 import io
 import pathlib
 import time
@@ -345,12 +346,47 @@ class CurveEditor(_AbstractEditor):
 
 
 @typing.final
+@dataclasses.dataclass(frozen=True)
+class Raster:
+    """An image that a `PointsEditor`'s function draws under its lines.
+
+    **Arguments:**
+
+    - `pixels`: `(rows, columns)` grey or `(rows, columns, 3 or 4)` RGB(A) values in
+      [0, 1]; row 0 is the top of the image.
+    - `extent`: `(x_min, x_max, y_min, y_max)`, where the image lies in the editor's
+      coordinates (y up).
+    """
+
+    pixels: np.ndarray
+    extent: tuple[float, float, float, float] = (0.0, 1.0, 0.0, 1.0)
+
+    def __post_init__(self):
+        pixels = np.asarray(self.pixels, dtype=float)
+        if pixels.ndim not in (2, 3) or (pixels.ndim == 3 and pixels.shape[2] not in (3, 4)):
+            raise ValueError(f"a Raster has (rows, columns[, 3 or 4]) pixels, got {pixels.shape}")
+        if len(self.extent) != 4:
+            raise ValueError(f"extent must be (x_min, x_max, y_min, y_max), got {self.extent}")
+        object.__setattr__(self, "pixels", pixels)
+
+    def png(self) -> bytes:
+        """The pixels as PNG bytes (what the browser shows)."""
+        from PIL import Image
+
+        rgb = np.round(255 * np.clip(np.nan_to_num(self.pixels), 0.0, 1.0)).astype(np.uint8)
+        buffer = io.BytesIO()
+        Image.fromarray(rgb).save(buffer, format="PNG", compress_level=1)  # fast, not small
+        return buffer.getvalue()
+
+
+@typing.final
 class PointsEditor(_AbstractEditor):
     """Drag points and see what a Python function draws from them: for constructions that
     are not a single NURBS curve (a PH curve through three points, a chain of segments).
 
     `draw(points)` gets the points as an array `(count, 2)` and returns a dict from a label
-    to the points `(m, 2)` of a polyline to draw (the labels make the legend); a
+    to the points `(m, 2)` of a polyline to draw (the labels make the legend); one value may
+    instead be a `Raster`, an image drawn under the lines (a picture being deformed). A
     `ValueError` it raises is shown as the message and the drag is refused. The current
     points are `editor.points`, a trait you can `observe`.
     """
@@ -382,8 +418,13 @@ class PointsEditor(_AbstractEditor):
         lines = self._function(points)
         if not isinstance(lines, dict):
             raise ValueError(f"draw must return a dict of label -> (m, 2) points, got {lines!r}")
+        if sum(isinstance(line, Raster) for line in lines.values()) > 1:
+            raise ValueError("draw may return one Raster at most")
         checked = {}
         for label, line in lines.items():
+            if isinstance(line, Raster):
+                checked[str(label)] = line
+                continue
             line = np.asarray(line, dtype=float)
             if line.ndim != 2 or line.shape[1] != 2:
                 raise ValueError(f"draw's {label!r} must have shape (m, 2), got {line.shape}")
@@ -403,15 +444,23 @@ class PointsEditor(_AbstractEditor):
         if key == self._drawn:
             return
         self._drawn = key
-        lines = [{"label": label, "data": _packed(line)} for label, line in self._lines.items()]
-        self._publish({"request": self.request, "error": "", "lines": lines})
+        drawing = {"request": self.request, "error": "", "lines": []}
+        for label, line in self._lines.items():
+            if isinstance(line, Raster):
+                drawing["image"] = {"png": line.png(), "extent": [float(x) for x in line.extent]}
+            else:
+                drawing["lines"].append({"label": label, "data": _packed(line)})
+        self._publish(drawing)
 
     def picture(self) -> bytes:
         figure = figure_of((6, 4.5))
         ax = figure.add_subplot()
         points = np.asarray(self.points)
         for label, line in self._lines.items():
-            ax.plot(line[:, 0], line[:, 1], lw=2, label=label)
+            if isinstance(line, Raster):
+                ax.imshow(np.clip(line.pixels, 0, 1), extent=line.extent, origin="upper")
+            else:
+                ax.plot(line[:, 0], line[:, 1], lw=2, label=label)
         ax.plot(points[:, 0], points[:, 1], "o", color="0.3", ms=7, label="points (drag them)")
         ax.set_aspect("equal", adjustable="datalim")
         ax.legend(fontsize=8)

@@ -272,3 +272,47 @@ def test_motion_editor_keeps_its_camera_and_its_memory_over_400_updates(lab):
     assert not error_outputs(page)
     assert not page.console_errors, [m.text for m in page.console_errors]
     page.close()
+
+
+POINTS_CELL = """\
+import numpy as np
+import diffnurbs as dn
+
+def draw(points, weights):
+    # The weighted centroid, drawn as a short cross, and the polygon through the points.
+    c = (weights[:, None] * points).sum(axis=0) / weights.sum()
+    return {"polygon": points, "centroid": np.array([c - 0.1, c + 0.1])}
+
+editor = dn.widgets.PointsEditor(np.eye(4, 2) + [[0, 0], [0, 0], [1, 1], [2, 0]], draw,
+                                 weights=np.ones(4), min_points=3)
+editor"""
+
+
+def test_points_editor_weights_adds_and_deletes_points(lab):
+    open_notebook, root = lab
+    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(POINTS_CELL)]))
+    nbformat.write(nb, root / "points.ipynb")
+    page = open_notebook("points.ipynb")
+    run_all(page)
+    editor = page.locator(".dn-editor")
+    editor.wait_for(timeout=120_000)
+    points = editor.locator(".dn-point")
+    assert points.count() == 4
+    before = _drawn_lines(editor)
+    points.nth(2).hover()
+    page.mouse.wheel(0, -300)  # heavier: the centroid moves towards the point
+    _wait_until_settled(page)
+    assert _drawn_lines(editor) != before
+    assert float(editor.locator(".dn-weight").input_value()) > 1
+    box = editor.locator(".dn-plot").bounding_box()
+    page.mouse.dblclick(box["x"] + 0.3 * box["width"], box["y"] + 0.5 * box["height"])
+    _wait_until_settled(page)
+    assert points.count() == 5
+    for _ in range(3):  # down to three points, and not below
+        points.nth(0).click(button="right")
+        _wait_until_settled(page)
+    assert points.count() == 3
+    assert "at least 3 points" in editor.locator(".dn-message").text_content()
+    assert not error_outputs(page)
+    assert not page.console_errors, [m.text for m in page.console_errors]
+    page.close()

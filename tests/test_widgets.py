@@ -361,3 +361,34 @@ def test_raster_bad_arguments():
             np.zeros((2, 2)),
             lambda p: {"a": Raster(np.zeros((2, 2))), "b": Raster(np.zeros((2, 2)))},
         )
+
+
+def test_points_editor_with_weights_and_a_variable_count():
+    def draw(points, weights):
+        return {"weighted": points * weights[:, None]}
+
+    editor = PointsEditor(np.eye(3, 2), draw, weights=[1.0, 2.0, 3.0], min_points=2)
+    np.testing.assert_array_equal(
+        unpacked(editor.drawing["lines"][0]["data"]), np.eye(3, 2) * [[1], [2], [3]]
+    )
+    # The browser adds a point with its weight, changes a weight, deletes points.
+    browser_edit(editor, control_points=[[0, 0], [1, 0], [0.5, 0.5], [0, 1]], weights=[1, 2, 5, 3])
+    assert editor.points.shape == (4, 2) and editor.weights.tolist() == [1, 2, 5, 3]
+    np.testing.assert_array_equal(unpacked(editor.drawing["lines"][0]["data"])[2], [2.5, 2.5])
+    for state, message in [
+        ({"control_points": [[0, 0]], "weights": [1]}, "at least 2 points stay"),
+        ({"control_points": [[0, 0], [1, 1]], "weights": [1, -1]}, "positive weights"),
+    ]:
+        browser_edit(editor, **state)
+        assert message in editor.drawing["error"]
+        assert editor.points.shape == (4, 2)
+    # A setting outside the editor changes what draw returns: redraw() draws it again.
+    scale = [1.0]
+    fixed = PointsEditor(np.eye(2), lambda p: {"line": scale[0] * p})
+    scale[0] = 3.0
+    fixed.redraw()
+    np.testing.assert_array_equal(unpacked(fixed.drawing["lines"][0]["data"]), 3 * np.eye(2))
+    browser_edit(fixed, control_points=[[0, 0]])
+    assert "expected 2 points" in fixed.drawing["error"]
+    with pytest.raises(ValueError, match="min_points"):
+        PointsEditor(np.eye(2), lambda p: {}, min_points=3)

@@ -84,7 +84,13 @@ function render({ model, el }) {
   const pointsMode = model.get("mode") === "points";
   const WIDTH = model.get("width");
   const HEIGHT = model.get("height");
-  if (pointsMode) bar.style.display = "none";
+  // A points editor shows only the weight box, and only when its points have weights.
+  if (pointsMode) {
+    for (const box of bar.children) if (box !== weightBox) box.style.display = "none";
+    if (!model.get("state").weights) bar.style.display = "none";
+  }
+  // At least this many points stay when a point is deleted; 0: a points editor keeps its count.
+  const minPoints = model.get("min_points");
   const legend = document.createElement("div");
   legend.className = "dn-legend";
   const message = document.createElement("div");
@@ -423,6 +429,11 @@ function render({ model, el }) {
   });
 
   function restructure(points, weights, degree) {
+    if (pointsMode) {
+      state = { ...state, control_points: points, weights };
+      selected = Math.min(selected, points.length - 1);
+      return edited(performance.now());
+    }
     const [a, b] = domain();
     state = { control_points: points, weights, degree,
       knots: clampedUniform(points.length, degree, a, b) };
@@ -430,7 +441,7 @@ function render({ model, el }) {
     edited(performance.now());
   }
   svg.addEventListener("dblclick", (event) => {
-    if (pointsMode) return;
+    if (pointsMode && !minPoints) return;
     const [x, y] = local(event);
     if (y > HEIGHT) return;
     const q = toWorld(x, y);
@@ -455,11 +466,13 @@ function render({ model, el }) {
   });
   pointGroup.addEventListener("contextmenu", (event) => {
     event.preventDefault();
-    if (pointsMode) return;
+    if (pointsMode && !minPoints) return;
     const index = Number(event.target.dataset.index);
     const points = state.control_points;
-    if (Number.isNaN(index) || points.length <= state.degree + 1) {
-      message.textContent = `a curve of degree ${state.degree} needs at least ${state.degree + 1} points`;
+    const fewest = pointsMode ? minPoints : state.degree + 1;
+    if (Number.isNaN(index) || points.length <= fewest) {
+      message.textContent = pointsMode ? `at least ${fewest} points stay`
+        : `a curve of degree ${state.degree} needs at least ${fewest} points`;
       return;
     }
     const weights = state.weights && state.weights.filter((_, i) => i !== index);
@@ -476,7 +489,7 @@ function render({ model, el }) {
   }
   pointGroup.addEventListener("wheel", (event) => {
     const index = Number(event.target.dataset.index);
-    if (pointsMode || Number.isNaN(index)) return;
+    if ((pointsMode && !state.weights) || Number.isNaN(index)) return;
     event.preventDefault();
     selected = index;
     const w = state.weights ? state.weights[index] : 1;

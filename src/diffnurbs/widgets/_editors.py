@@ -387,17 +387,36 @@ class PointsEditor(_AbstractEditor):
     `draw(points)` gets the points as an array `(count, 2)` and returns a dict from a label
     to the points `(m, 2)` of a polyline to draw (the labels make the legend); one value may
     instead be a `Raster`, an image drawn under the lines (a picture being deformed). A
-    `ValueError` it raises is shown as the message and the drag is refused. The current
-    points are `editor.points`, a trait you can `observe`.
+    `ValueError` it raises is shown as the message and the drag is refused.
+
+    With `weights`, every point carries a weight (the mouse wheel over a point, or the
+    weight box) and `draw(points, weights)` gets both. With `min_points`, the student may
+    add points (double-click: into the nearest leg of the polygon through the points) and
+    delete them (right-click), down to `min_points`. The current points and weights are
+    `editor.points` and `editor.weights`, traits you can `observe`; after a change that
+    `draw` depends on (a setting outside the editor), call `editor.redraw()`.
     """
 
     points = traitlets.Instance(np.ndarray)
+    weights = traitlets.Instance(np.ndarray, allow_none=True)
+    min_points = traitlets.Int(0).tag(sync=True)
 
-    def __init__(self, points: ArrayLike, draw: Callable[[np.ndarray], dict], **kwargs):
+    def __init__(
+        self,
+        points: ArrayLike,
+        draw: Callable[..., dict],
+        *,
+        weights: ArrayLike | None = None,
+        min_points: int | None = None,
+        **kwargs,
+    ):
         """**Arguments:**
 
         - `points`: the starting points, shape `(count, 2)`.
-        - `draw`: the function from points to labelled polylines (see the class).
+        - `draw`: the function from points (and weights) to labelled polylines (see the
+          class).
+        - `weights`: positive weights of the points, shape `(count,)`, or None (no weights).
+        - `min_points`: None (the count is fixed) or the fewest points that may remain.
         - `kwargs`: passed to `anywidget.AnyWidget`; `width` and `height` size the plot
           (pixels, default 560 x 400).
         """
@@ -406,16 +425,56 @@ class PointsEditor(_AbstractEditor):
             raise ValueError(f"points must have shape (count, 2), got {points.shape}")
         if not callable(draw):
             raise ValueError(f"draw must be a function of the points, got {draw!r}")
+        if min_points is not None and not 1 <= min_points <= len(points):
+            raise ValueError(f"min_points must lie in [1, {len(points)}], got {min_points}")
         self._function = draw
         self._drawn = None
         self._started = time.perf_counter()
-        self._lines = self._lines_of(points)  # a bad start raises here, before any display
         self._accepted = {"control_points": _exact(points)}
-        super().__init__(mode="points", points=points, state=self._accepted, show={}, **kwargs)
+        if weights is not None:
+            self._accepted["weights"] = _exact(weights)
+        self._min_points = min_points
+        # A bad start raises here, before any display.
+        points, weights, self._lines = self._checked(self._accepted, len(points))
+        super().__init__(
+            mode="points",
+            points=points,
+            weights=weights,
+            min_points=min_points or 0,
+            state=self._accepted,
+            show={},
+            **kwargs,
+        )
         self._draw()
 
-    def _lines_of(self, points):
-        lines = self._function(points)
+    def _checked(self, state, count):
+        """`(points, weights, lines)` of a state, or `ValueError` saying what is wrong."""
+        points = np.asarray(state["control_points"], dtype=float)
+        weights = state.get("weights")
+        if self._min_points is None and len(points) != count:
+            raise ValueError(f"expected {count} points, got {len(points)}")
+        if self._min_points is not None and len(points) < self._min_points:
+            raise ValueError(f"at least {self._min_points} points stay, got {len(points)}")
+        if weights is None:
+            return points, None, self._lines_of(points)
+        weights = np.asarray(weights, dtype=float)
+        if weights.shape != (len(points),) or not np.all(weights > 0):
+            raise ValueError(f"expected {len(points)} positive weights, got {weights}")
+        return points, weights, self._lines_of(points, weights)
+
+    def redraw(self) -> None:
+        """Draw again from the current points: after a change `draw` depends on."""
+        self._started = time.perf_counter()
+        try:
+            self._lines = self._lines_of(self.points, self.weights)
+        except ValueError as error:
+            self.drawing = {**self.drawing, "error": str(error)}
+            return
+        self._drawn = None
+        self._draw()
+
+    def _lines_of(self, points, weights=None):
+        lines = self._function(points) if weights is None else self._function(points, weights)
         if not isinstance(lines, dict):
             raise ValueError(f"draw must return a dict of label -> (m, 2) points, got {lines!r}")
         if sum(isinstance(line, Raster) for line in lines.values()) > 1:
@@ -432,12 +491,10 @@ class PointsEditor(_AbstractEditor):
         return checked
 
     def _accept(self, state):
-        points = np.asarray(state["control_points"], dtype=float)
-        if points.shape != self.points.shape:
-            raise ValueError(f"expected {len(self.points)} points, got {len(points)}")
-        self._lines = self._lines_of(points)
+        points, weights, self._lines = self._checked(state, len(self.points))
         self._accepted = state
-        self.points = points
+        with self.hold_trait_notifications():
+            self.points, self.weights = points, weights
 
     def _draw(self):
         key = (self.request, id(self._lines))

@@ -392,3 +392,19 @@ def test_points_editor_with_weights_and_a_variable_count():
     assert "expected 2 points" in fixed.drawing["error"]
     with pytest.raises(ValueError, match="min_points"):
         PointsEditor(np.eye(2), lambda p: {}, min_points=3)
+
+
+def test_pictures_leave_the_notebooks_plotting_backend_alone():
+    # In a notebook pyplot draws inline; an editor's picture once switched it to Agg, after
+    # which every `plt.show()` of the chapter drew nothing.
+    import matplotlib
+
+    before = matplotlib.get_backend()
+    inline = "module://matplotlib_inline.backend_inline"
+    matplotlib.use(inline)
+    try:
+        CurveEditor(random_curve(np.random.default_rng(0), 3))._repr_mimebundle_()
+        MotionEditor(VASE)._repr_mimebundle_()
+        assert matplotlib.get_backend() == inline
+    finally:
+        matplotlib.use(before)

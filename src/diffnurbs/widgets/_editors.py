@@ -186,9 +186,8 @@ def png(figure) -> bytes:
 
 
 def figure_of(size):
-    import matplotlib
-
-    matplotlib.use("Agg", force=False)
+    """A matplotlib figure outside pyplot: drawing it leaves the notebook's backend alone
+    (switching pyplot to Agg would make every later `plt.show()` draw nothing)."""
     from matplotlib.figure import Figure
 
     return Figure(figsize=size, dpi=80)

@@ -256,6 +256,7 @@ def test_motion_editor_shows_the_librarys_surface(operation, values):
     start = np.asarray(expected.grid(np.linspace(u0, u1, 200), np.asarray([v0])))[:, 0]
     np.testing.assert_allclose(floats(editor.view.items["profile"]["positions"]), start, atol=1e-6)
     assert ("path" in editor.view.items) == ("sweep" in operation)
+    assert ("axis" in editor.view.items) == (operation == "revolve")
     # The control net is drawn for the exact NURBS surfaces, and goes when the surface is not one.
     assert ("surface net" in editor.view.items) == (operation != "kinematic sweep")
     editor.choice.value = "revolve" if operation == "kinematic sweep" else "kinematic sweep"

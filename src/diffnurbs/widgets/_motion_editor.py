@@ -51,8 +51,8 @@ class MotionEditor(Pictured, ipywidgets.VBox):
 
     - *extrude*: along the y axis tilted by `tilt` degrees towards x, by `length`
       (`extrude`, exact);
-    - *revolve*: about the vertical axis through `(offset, 0, 0)`, by `angle` degrees
-      (`revolve`, exact);
+    - *revolve*: about the vertical axis through `(offset, 0, 0)` (drawn in black), by
+      `angle` degrees (`revolve`, exact);
     - *sweep*: the profile translated along `path`, keeping its orientation (`sweep`,
       exact: seed eq. 2.4);
     - *kinematic sweep*: the profile carried by the path's rotation-minimising or Frenet
@@ -162,6 +162,13 @@ class MotionEditor(Pictured, ipywidgets.VBox):
                 self.view.curve("path", self.path, color="#2c3e50")
             else:
                 self.view.remove("path")
+            if operation == "revolve":  # the axis, a little longer than the profile is high
+                heights = np.asarray(self.profile.curve.control_points)[:, 1]
+                ends = [heights.min() - 0.3, heights.max() + 0.3]
+                offset = self._values()[1]
+                self.view.curve("axis", [[offset, 0.0, z] for z in ends], color="#000000")
+            else:
+                self.view.remove("axis")
         self.surface = surface
 
     @staticmethod

@@ -40,9 +40,9 @@ test: install
 bench: install
 	$(BIN)/python bench/run.py
 
-# Executes every course/*.ipynb headless; writes build/html/index.html and one page per chapter.
+# Executes every chapter headless and builds the course website: build/site/_build/html/index.html.
 html: install
-	$(BIN)/python tools/build_html.py --out build/html
+	$(BIN)/python tools/build_html.py --out build/site
 
 # Student notebooks exercises/NN_topic.ipynb from the masters solutions/NN_topic.ipynb (committed);
 # otter's autograder versions, with the hidden tests, stay in build/otter/ (git-ignored).

@@ -68,6 +68,8 @@ from ._report import (
     chapter_metrics as chapter_metrics,
     course_report as course_report,
     heading_anchors as heading_anchors,
+    jupyter_anchor as jupyter_anchor,
 )
 from ._scores import question_columns as question_columns, write_csv as write_csv
 from ._session import KernelSession as KernelSession
+from ._site import build_site as build_site, stage_site as stage_site

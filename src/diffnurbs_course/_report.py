@@ -56,9 +56,14 @@ def _count_asserts(source: str) -> int:
     return sum(isinstance(node, ast.Assert) for node in ast.walk(tree))
 
 
+def jupyter_anchor(heading: str) -> str:
+    """The anchor JupyterLab gives a Markdown heading: its text, spaces made `-`, case kept
+    (the course site makes the same, so links between chapters work in both)."""
+    return heading.strip().replace(" ", "-")
+
+
 def heading_anchors(nb: nbformat.NotebookNode) -> set[str]:
-    """The `#anchors` of a notebook's Markdown headings, as JupyterLab and MyST make them
-    (spaces to `-`, case kept)."""
+    """The `#anchors` of a notebook's Markdown headings (`jupyter_anchor`)."""
     anchors = set()
     for cell in nb.cells:
         if cell.cell_type != "markdown":
@@ -66,7 +71,7 @@ def heading_anchors(nb: nbformat.NotebookNode) -> set[str]:
         for line in cell.source.splitlines():
             match = re.match(r"#+\s+(.*)", line)
             if match:
-                anchors.add(match.group(1).strip().replace(" ", "-"))
+                anchors.add(jupyter_anchor(match.group(1)))
     return anchors
 
 

@@ -63,14 +63,21 @@ def lab(tmp_path_factory):
         browser.close()
 
 
+def run_cell(lab, name: str, source: str):
+    """Open a new notebook `name` of one code cell, `source`, in JupyterLab and run it;
+    return the page."""
+    open_notebook, root = lab
+    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(source)]))
+    nbformat.write(nb, root / f"{name}.ipynb")
+    page = open_notebook(f"{name}.ipynb")
+    run_all(page)
+    return page
+
+
 @pytest.fixture(scope="module")
 def page(lab):
-    open_notebook, root = lab
-    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(EDITOR_CELL)]))
-    nbformat.write(nb, root / "editor.ipynb")
-    page = open_notebook("editor.ipynb")
+    page = run_cell(lab, "editor", EDITOR_CELL)
     try:
-        run_all(page)
         page.locator(".dn-editor").wait_for(timeout=120_000)
     except playwright.Error:
         page.screenshot(path=BROWSER_OUT / "failure.png")
@@ -225,11 +232,7 @@ def js_heap_mb(page) -> float:
 
 
 def test_motion_editor_keeps_its_camera_and_its_memory_over_400_updates(lab):
-    open_notebook, root = lab
-    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(MOTION_CELL)]))
-    nbformat.write(nb, root / "motion.ipynb")
-    page = open_notebook("motion.ipynb")
-    run_all(page)
+    page = run_cell(lab, "motion", MOTION_CELL)
     view, canvas = page.locator(".dn-view"), page.locator(".dn-view canvas")
     view.wait_for(timeout=120_000)
     assert view.get_attribute("data-error") is None, "no WebGL"
@@ -289,11 +292,7 @@ editor"""
 
 
 def test_points_editor_weights_adds_and_deletes_points(lab):
-    open_notebook, root = lab
-    nb = dc.clean_notebook(nbformat.v4.new_notebook(cells=[nbformat.v4.new_code_cell(POINTS_CELL)]))
-    nbformat.write(nb, root / "points.ipynb")
-    page = open_notebook("points.ipynb")
-    run_all(page)
+    page = run_cell(lab, "points", POINTS_CELL)
     editor = page.locator(".dn-editor")
     editor.wait_for(timeout=120_000)
     points = editor.locator(".dn-point")

@@ -61,16 +61,13 @@ def curve_polyline(curve, samples=200):
     return pv.lines_from_points(points)
 
 
-def use_notebook_backend():
+def use_notebook_backend() -> None:
     """Choose pyvista's Jupyter backend: a static image when executed headless, else interactive.
 
     Headless means `PYVISTA_OFF_SCREEN=true` (set by `make test` and `make html`); then
     the figure is a PNG rendered through EGL. In JupyterLab (`make lab`) the "html"
-    backend gives a rotatable vtk.js view.
-
-    **Returns:**
-
-    The name of the backend chosen.
+    backend gives a rotatable vtk.js view. Returns nothing, so that the set-up cell of a
+    chapter prints nothing (the choice is `pyvista.global_theme.jupyter_backend`).
     """
     # VTK picks its render window when the first one is made: set it before any render.
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
@@ -78,7 +75,6 @@ def use_notebook_backend():
     headless = os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true"
     backend = "static" if headless else "html"
     pv.set_jupyter_backend(backend)
-    return backend
 
 
 def show(plotter, *captions: str) -> None:

@@ -1,5 +1,6 @@
 """`MotionEditor`: seed 000's surfaces of motion, made live (a profile editor beside a 3D view)."""
 
+import html
 import math
 import pathlib
 import typing
@@ -150,7 +151,7 @@ class MotionEditor(Pictured, ipywidgets.VBox):
         try:
             surface = self.make(operation, self._values())
         except ValueError as error:
-            self.message.value = f"<span style='color:#b03a2e'>{error}</span>"
+            self.message.value = f"<span style='color:#b03a2e'>{html.escape(str(error))}</span>"
             return
         self.message.value = ""
         with self.view.hold_sync():
@@ -201,9 +202,9 @@ class MotionEditor(Pictured, ipywidgets.VBox):
         try:
             path = self.export(f"{self.file_name.value}.{self.file_format.value}")
         except (ValueError, OSError) as error:
-            self.message.value = f"<span style='color:#b03a2e'>{error}</span>"
+            self.message.value = f"<span style='color:#b03a2e'>{html.escape(str(error))}</span>"
             return
-        self.message.value = f"wrote <code>{path.resolve()}</code>"
+        self.message.value = f"wrote <code>{html.escape(str(path.resolve()))}</code>"
 
 
 def _start_of(surface: AbstractSurface) -> np.ndarray:

@@ -176,6 +176,8 @@ def check_saved_run(saved: Path) -> None:
     errors = [o for cell in code for o in cell.outputs if o.output_type == "error"]
     assert not errors, [f"{e.ename}: {e.evalue}" for e in errors]
     assert dc.count_figures(nb) >= 1, f"{saved.name} shows no figure"
+    # The chapter template's measures (course/AUTHORING.md), outputs included: no warning text.
+    assert not dc.chapter_metrics(ROOT / "course" / saved.name, nb).problems
 
 
 @pytest.mark.parametrize("chapter", WIDGET_CHAPTERS, ids=lambda path: path.stem)

@@ -54,6 +54,8 @@ def test_course_notebook_runs_and_draws(path, tmp_path, tmp_path_factory):
     seconds = dc.execute_notebook(nb, tmp_path, timeout=900)
     record_time(shared_dir(tmp_path_factory), path, seconds, "executed")
     assert dc.count_figures(nb) >= 1, f"{_id(path)} shows no figure"
+    # The chapter template's measures (course/AUTHORING.md), outputs included: no warning text.
+    assert not dc.chapter_metrics(path, nb).problems
 
 
 @pytest.mark.parametrize("path", SOLUTIONS, ids=_id)

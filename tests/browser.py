@@ -120,10 +120,17 @@ def run_all(page) -> None:
     wait_for_idle_kernel(page)
     page.locator("#jp-MainMenu").get_by_text("Run", exact=True).click()
     page.get_by_text("Run All Cells", exact=True).click()
+    # Done when no cell is queued or running and every code cell has its execution count, or
+    # when a cell raised (Run All stops there). Checking only for "no [*]" could pass before
+    # the first cell was even queued.
     page.wait_for_function(
-        "() => document.querySelectorAll('.jp-InputArea-prompt').length > 0 && "
-        "![...document.querySelectorAll('.jp-InputArea-prompt')]"
-        ".some(e => e.textContent.includes('*'))",
+        """() => {
+            const prompts = [...document.querySelectorAll('.jp-CodeCell .jp-InputArea-prompt')];
+            if (!prompts.length || prompts.some(e => e.textContent.includes('*'))) return false;
+            const raised = document.querySelector('.jp-OutputArea-output[data-mime-type='
+                + '"application/vnd.jupyter.stderr"] .jp-RenderedText, .jp-mod-error');
+            return raised !== null || prompts.every(e => /\\[\\d+\\]/.test(e.textContent));
+        }""",
         timeout=300_000,
     )
 

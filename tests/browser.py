@@ -127,8 +127,8 @@ def run_all(page) -> None:
         """() => {
             const prompts = [...document.querySelectorAll('.jp-CodeCell .jp-InputArea-prompt')];
             if (!prompts.length || prompts.some(e => e.textContent.includes('*'))) return false;
-            const raised = document.querySelector('.jp-OutputArea-output[data-mime-type='
-                + '"application/vnd.jupyter.stderr"] .jp-RenderedText, .jp-mod-error');
+            const raised = document.querySelector(
+                '[data-mime-type="application/vnd.jupyter.stderr"]');
             return raised !== null || prompts.every(e => /\\[\\d+\\]/.test(e.textContent));
         }""",
         timeout=300_000,

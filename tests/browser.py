@@ -73,6 +73,11 @@ def jupyter_lab(root: Path):
     settings = root / ".lab-settings" / "@jupyterlab" / "apputils-extension"
     settings.mkdir(parents=True)
     (settings / "notification.jupyterlab-settings").write_text('{"fetchNews": "false"}')
+    # Every cell in the page: with windowing, cells out of view are not rendered, and
+    # `run_all` would judge a long notebook by its first screenful of prompts.
+    tracker = root / ".lab-settings" / "@jupyterlab" / "notebook-extension"
+    tracker.mkdir(parents=True)
+    (tracker / "tracker.jupyterlab-settings").write_text('{"windowingMode": "none"}')
     env = {
         **os.environ,
         "JUPYTER_CONFIG_DIR": str(root / ".jupyter-config"),

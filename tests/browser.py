@@ -17,6 +17,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+import nbformat
 import pytest
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 
@@ -140,14 +141,37 @@ def run_all(page) -> None:
     )
 
 
-def save(page) -> None:
-    """Save the open notebook (File > Save Notebook) and wait until the tab is clean."""
-    page.locator("#jp-MainMenu").get_by_text("File", exact=True).click()
-    page.get_by_text("Save Notebook", exact=True).first.click()
-    page.wait_for_function(
-        "() => !document.querySelector('.lm-TabBar-tab.jp-mod-current.jp-mod-dirty')",
-        timeout=60_000,
+def executed_prompts(page) -> int:
+    """How many code cells of the open notebook show an execution count."""
+    return page.eval_on_selector_all(
+        ".jp-CodeCell .jp-InputArea-prompt",
+        "prompts => prompts.filter(e => /\\[\\d+\\]/.test(e.textContent)).length",
     )
+
+
+def save(page, path: Path) -> None:
+    """Save the open notebook (File > Save Notebook) to `path` and wait until the file holds
+    every execution count the page shows.
+
+    A clean tab alone is not proof: a save that the menu dropped leaves the file as it was
+    (seen once in CI, where the saved chapter then had no execution counts at all).
+    """
+    shown = executed_prompts(page)
+    for _ in range(3):
+        page.locator("#jp-MainMenu").get_by_text("File", exact=True).click()
+        page.get_by_text("Save Notebook", exact=True).first.click()
+        page.wait_for_function(
+            "() => !document.querySelector('.lm-TabBar-tab.jp-mod-current.jp-mod-dirty')",
+            timeout=60_000,
+        )
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            nb = nbformat.read(path, as_version=4)
+            saved = sum(c.get("execution_count") is not None for c in nb.cells)
+            if saved >= shown:
+                return
+            page.wait_for_timeout(500)
+    raise AssertionError(f"{path.name}: the page shows {shown} executed cells, the file {saved}")
 
 
 def error_outputs(page) -> list[str]:

@@ -31,6 +31,7 @@ LAYOUT = dc.CourseLayout(ROOT)
 
 TIMES_TABLE = LAYOUT.build / "notebook_times.md"
 
+
 def _shows_an_editor(path: Path) -> bool:
     cells = dc.read_notebook(path).cells
     return any(cell.cell_type == "code" and "dn.widgets." in cell.source for cell in cells)

@@ -84,6 +84,8 @@ def jupyter_lab(root: Path):
         "JUPYTER_CONFIG_DIR": str(root / ".jupyter-config"),
         "JUPYTERLAB_SETTINGS_DIR": str(root / ".lab-settings"),
         "JUPYTERLAB_WORKSPACES_DIR": str(root / ".lab-workspaces"),
+        # As `make lab` runs it: pyvista figures are rotatable vtk.js views, not PNGs.
+        "PYVISTA_OFF_SCREEN": "false",
     }
     log = open(root / "jupyter.log", "w")  # noqa: SIM115 (closed below)
     server = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, env=env)

@@ -32,15 +32,9 @@ LAYOUT = dc.CourseLayout(ROOT)
 TIMES_TABLE = LAYOUT.build / "notebook_times.md"
 
 
-def _shows_an_editor(path: Path) -> bool:
-    cells = dc.read_notebook(path).cells
-    return any(cell.cell_type == "code" and "dn.widgets." in cell.source for cell in cells)
-
-
-WIDGET_CHAPTERS = [p for p in dc.notebooks(LAYOUT.course) if _shows_an_editor(p)]
-"""The chapters with editors. `test_browser.py` runs them in JupyterLab in Chromium and checks
-the saved notebook as `test_notebooks.py` checks the others: one run each, the way students
-meet them, and not a second headless one."""
+COURSE = dc.notebooks(LAYOUT.course)
+"""The chapters. `test_browser.py` runs each in JupyterLab in Chromium, where students meet
+them, and checks the saved notebook; they are not also run headless."""
 
 
 def shared_dir(tmp_path_factory) -> Path:

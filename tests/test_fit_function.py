@@ -56,6 +56,21 @@ def test_sine_knots_start_at_its_extrema_and_inflection(rng):
         assert np.any(knots == feature)
 
 
+def test_an_inflection_on_a_grid_point_is_found():
+    """On [-1, 1] the scan grid holds t = 0 exactly, where f'' = -9 sin 3t is exactly zero:
+    the sign change passes through a grid point, not inside a cell (it was missed)."""
+    grid = np.asarray(jnp.linspace(-1.0, 1.0, 4097))
+    assert grid[2048] == 0.0
+    _, report = dn.fit_function(lambda t: jnp.sin(3 * t), -1.0, 1.0, 1e-6, full_output=True)
+    np.testing.assert_allclose(report.features, [-np.pi / 6, 0.0, np.pi / 6], atol=1e-12)
+    assert report.kinks.shape == (0,)
+    _, report = dn.fit_function(
+        lambda t: jnp.abs(t - 0.3) + jnp.sin(3 * t), -1.0, 1.0, 1e-6, full_output=True
+    )
+    assert np.any(report.features == 0.0)
+    np.testing.assert_allclose(report.kinks, [0.3], atol=1e-12)
+
+
 def test_a_kink_with_a_sign_change_of_the_slope_is_fitted_exactly_at_degree_1(rng):
     def f(t):
         return jnp.abs(t - 0.3)

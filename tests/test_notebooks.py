@@ -1,9 +1,9 @@
 """Every notebook of the course runs top to bottom; notebooks are committed without outputs.
 
 Parametrized over the globs, so chapters written later are picked up. One kernel per notebook:
-course notebooks are executed here, except those with editors, which `test_browser.py` runs in
-JupyterLab; masters and exercises are executed by their grading run
-(`notebook_runs.graded`), which `test_grading.py` reuses for the scores.
+course chapters are executed by `test_browser.py`, in JupyterLab as students run them; masters
+and exercises are executed here by their grading run (`notebook_runs.graded`), which
+`test_grading.py` reuses for the scores.
 
 Exercises: the student version has `...` where answers go, so an answer cell, or a later cell
 that uses an answer, may raise. What must not raise: the grading and otter set-up cells, every
@@ -20,18 +20,16 @@ from pathlib import Path
 import nbformat
 import pytest
 from notebook_runs import (
+    COURSE,
     LAYOUT,
     ROOT,
-    WIDGET_CHAPTERS,
     answered,
     graded,
-    record_time,
     shared_dir,
 )
 
 import diffnurbs_course as dc
 
-COURSE = dc.notebooks(LAYOUT.course)
 SOLUTIONS = dc.notebooks(LAYOUT.solutions)
 EXERCISES = dc.notebooks(LAYOUT.exercises)
 DATA = Path(__file__).parent / "data"
@@ -46,16 +44,6 @@ def _id(path: Path) -> str:
 def test_committed_without_outputs(path):
     problems = dc.policy_problems(dc.read_notebook(path))
     assert not problems, f"{_id(path)}: {problems}; run `.venv/bin/python tools/nbclean.py`"
-
-
-@pytest.mark.parametrize("path", [p for p in COURSE if p not in WIDGET_CHAPTERS], ids=_id)
-def test_course_notebook_runs_and_draws(path, tmp_path, tmp_path_factory):
-    nb = dc.read_notebook(path)
-    seconds = dc.execute_notebook(nb, tmp_path, timeout=900)
-    record_time(shared_dir(tmp_path_factory), path, seconds, "executed")
-    assert dc.count_figures(nb) >= 1, f"{_id(path)} shows no figure"
-    # The chapter template's measures (course/AUTHORING.md), outputs included: no warning text.
-    assert not dc.chapter_metrics(path, nb).problems
 
 
 @pytest.mark.parametrize("path", SOLUTIONS, ids=_id)

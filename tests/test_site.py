@@ -2,7 +2,8 @@
 
 Built from the committed notebooks, unexecuted (`make html` executes them first; the tests
 execute every chapter elsewhere): what is checked here is the site itself — pages, table of
-contents, search, math, links and anchors, check cells left out.
+contents, search, math, links and anchors, check cells left out (their outputs kept when
+the chapter is executed and they are not folded).
 """
 
 import functools
@@ -13,12 +14,14 @@ import threading
 from pathlib import Path
 from urllib.parse import unquote, urldefrag, urlparse
 
+import nbformat
 import pytest
 from browser import CHROMIUM_ARGS, chromium_path
 from notebook_runs import LAYOUT
 from playwright import sync_api as playwright
 
 import diffnurbs_course as dc
+from diffnurbs_course._site import _stage_notebook
 
 CHAPTERS = dc.notebooks(LAYOUT.course)
 EXERCISES = dc.notebooks(LAYOUT.exercises)
@@ -79,6 +82,18 @@ def test_check_cells_are_left_out_and_answers_folded(site):
                 wordiest = max(lines, key=lambda line: len(re.findall(r"[A-Za-z]{3,}", line)))
                 folded = re.findall(r"<details.*?</details>", text, flags=re.S)
                 assert any(_shown(wordiest, block) for block in folded), f"{path.stem}: {wordiest}"
+
+
+def test_an_executed_check_cell_shows_its_outputs_not_its_code():
+    printed = nbformat.v4.new_output("stream", text="a table the prose cites\n")
+    cells = [nbformat.v4.new_code_cell("print(1)", outputs=[printed]) for _ in range(3)]
+    for cell in cells:
+        cell.metadata["tags"] = [dc.CHECK_TAG]
+    cells[1].metadata["jupyter"] = {"source_hidden": True, "outputs_hidden": True}
+    cells[2].outputs = []
+    staged = _stage_notebook(nbformat.v4.new_notebook(cells=cells))
+    tags = [cell.metadata["tags"][-1] for cell in staged.cells]
+    assert tags == ["remove-input", "remove-cell", "remove-cell"]
 
 
 def _shown(line: str, page: str) -> bool:

@@ -3,8 +3,8 @@
     python tools/build_html.py [--out build/site] [--jobs 2]
 
 The site (Jupyter Book: table of contents, search, math, every chapter and exercise page,
-check cells left out, editors shown as pictures of their first state) is written to
-`<out>/_build/html/index.html`. Exercises are shown unexecuted: they are the student's
+the code of check cells left out (what they print kept), editors shown as pictures of their
+first state) is written to `<out>/_build/html/index.html`. Exercises are shown unexecuted: they are the student's
 starting point. A chapter that raises is still published, with its traceback; the exit status
 is then 1.
 """

@@ -131,8 +131,14 @@ def critical_points(f: Callable, a: float, b: float) -> tuple[np.ndarray, np.nda
     _check_finite_values(d2, grid, "f''")
     features = []
     for values, roots in ((d1, roots1), (d2, roots2)):
-        big = np.maximum(np.abs(values[:-1]), np.abs(values[1:])) > 1e-6 * np.abs(values).max()
+        noise = 1e-6 * np.abs(values).max()
+        big = np.maximum(np.abs(values[:-1]), np.abs(values[1:])) > noise
         features.append(roots[(values[:-1] * values[1:] < 0) & big])
+        # A sign change through a grid point where the value is exactly zero (f'' of sin 3t
+        # at t = 0 on a grid that holds 0) has no cell whose ends differ in sign.
+        around = values[:-2] * values[2:] < 0
+        big = np.maximum(np.abs(values[:-2]), np.abs(values[2:])) > noise
+        features.append(np.asarray(grid)[1:-1][(values[1:-1] == 0) & around & big])
     step = (b - a) / (_SCAN_POINTS - 1)
     jump = np.abs(np.diff(d1))
     predicted = step * np.maximum(np.abs(d2[:-1]), np.abs(d2[1:]))

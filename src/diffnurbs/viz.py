@@ -92,13 +92,20 @@ def show(plotter, *captions: str) -> None:
     """
     from IPython.display import HTML, display
 
+    width, height = plotter.window_size
+    # The rotatable view is as wide as the page allows (at the plotter's width it was cut off
+    # on a laptop screen, the right-hand subplot hidden); the static image keeps its size.
+    rotatable = import_pyvista().global_theme.jupyter_backend == "html"
+    page_width = f"min({width}px, 100%)" if rotatable else f"{width}px"
     if captions:
-        width = plotter.window_size[0]
         cells = "".join(
             f"<div style='flex: 1; text-align: center'>{html.escape(text)}</div>"
             for text in captions
         )
-        style = f"display: flex; width: {width}px; font: 13px sans-serif; white-space: pre-line"
+        style = f"display: flex; width: {page_width}; font: 13px sans-serif; white-space: pre-line"
         display(HTML(f"<div style='{style}'>{cells}</div>"))
-    plotter.show()
+    if rotatable:
+        plotter.show(jupyter_kwargs={"width": page_width, "height": f"{height}px"})
+    else:
+        plotter.show()
     plotter.close()

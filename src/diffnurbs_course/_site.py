@@ -52,12 +52,15 @@ sphinx:
 
 
 def _stage_notebook(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
-    """The notebook as the site shows it (in place): check cells removed, answers folded,
-    outputs that are only a live widget (no picture) dropped."""
+    """The notebook as the site shows it (in place): the code of check cells removed (their
+    outputs kept, as JupyterLab shows them, unless folded too), answers folded, outputs that
+    are only a live widget (no picture) dropped."""
     for cell in nb.cells:
         tags = cell.metadata.get("tags", [])
         if CHECK_TAG in tags:
-            cell.metadata["tags"] = [*tags, "remove-cell"]
+            # The prose may cite what a check prints (a table, a timing figure).
+            shown = cell.outputs and not cell.metadata.get("jupyter", {}).get("outputs_hidden")
+            cell.metadata["tags"] = [*tags, "remove-input" if shown else "remove-cell"]
         elif _ANSWERS_TAG in tags and cell.cell_type == "code":
             cell.metadata["tags"] = [*tags, "hide-cell"]
         elif _ANSWERS_TAG in tags:  # MyST folds Markdown with a directive, not a tag

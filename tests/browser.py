@@ -123,22 +123,32 @@ def wait_for_idle_kernel(page) -> None:
     page.wait_for_selector(".jp-Notebook-ExecutionIndicator[data-status='idle']", timeout=120_000)
 
 
-def run_all(page) -> None:
-    """Run every cell of the open notebook, as Run > Run All Cells does, and wait for idle."""
+def run_all(page, code_cells: int) -> None:
+    """Run every cell of the open notebook, as Run > Run All Cells does, and wait until each
+    of its `code_cells` code cells has run (or one raised)."""
     wait_for_idle_kernel(page)
+    shown = page.locator(".jp-Notebook .jp-CodeCell").count()
+    assert shown == code_cells, f"{shown} of {code_cells} code cells are in the page (windowing?)"
+    # A cell whose code is folded (the chapters' checks) shows no prompt, so its execution
+    # count could not be seen: unfold every cell's code first (it changes nothing else).
+    page.locator("#jp-MainMenu").get_by_text("View", exact=True).click()
+    page.get_by_text("Expand All Code", exact=True).click()
     page.locator("#jp-MainMenu").get_by_text("Run", exact=True).click()
     page.get_by_text("Run All Cells", exact=True).click()
     # Done when no cell is queued or running and every code cell has its execution count, or
     # when a cell raised (Run All stops there). Checking only for "no [*]" could pass before
     # the first cell was even queued.
     page.wait_for_function(
-        """() => {
+        """count => {
             const prompts = [...document.querySelectorAll('.jp-CodeCell .jp-InputArea-prompt')];
-            if (!prompts.length || prompts.some(e => e.textContent.includes('*'))) return false;
-            const raised = document.querySelector(
-                '[data-mime-type="application/vnd.jupyter.stderr"]');
-            return raised !== null || prompts.every(e => /\\[\\d+\\]/.test(e.textContent));
+            if (prompts.length !== count || prompts.some(e => e.textContent.includes('*')))
+                return false;
+            const raised = [...document.querySelectorAll(
+                '[data-mime-type="application/vnd.jupyter.stderr"]')].some(
+                e => e.textContent.includes('Traceback'));
+            return raised || prompts.every(e => /\\[\\d+\\]/.test(e.textContent));
         }""",
+        arg=code_cells,
         timeout=300_000,
     )
 

@@ -154,4 +154,4 @@ def answered(master: Path, work: Path):
     for cell, solution in zip(student.cells, solved.cells, strict=True):
         if dc.ANSWER_TAG in cell.metadata.get("tags", []):
             cell.source = solution.source
-    return student
+    return dc.normalize_exercise(student)

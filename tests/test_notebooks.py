@@ -77,7 +77,7 @@ def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
     bad = []
     for error in errors:
         index, source = error["index"], error["source"]
-        setup = index == 0 or index > len(code) or "otter.Notebook(" in source
+        setup = index == 0 or index > len(code) or "grader = Notebook(" in source
         check = source.lstrip().startswith("grader.check(")
         if setup or check or index < first_answer:
             bad.append(_describe(error))
@@ -116,7 +116,8 @@ def test_demo_exercise_in_student_mode(tmp_path):
     shutil.copyfile(DEMO[1], tmp_path / "blank" / DEMO[1].name)
     blank = dc.read_notebook(DEMO[1])
     dc.execute_notebook(blank, tmp_path / "blank", allow_errors=True)
-    assert all("failed" in text for text in _check_outputs(blank).values())
+    texts = _check_outputs(blank)
+    assert texts == {q: f"{q}: not answered yet" for q in ("q1", "q2")}, texts
 
     (tmp_path / "solved").mkdir()
     solved = answered(DEMO[0], tmp_path)
@@ -125,3 +126,14 @@ def test_demo_exercise_in_student_mode(tmp_path):
     texts = _check_outputs(solved)
     assert set(texts) == {"q1", "q2"}
     assert all("passed" in text for text in texts.values()), texts
+
+    # A wrong answer: the statement that failed and its message, no doctest transcript.
+    wrong = answered(DEMO[0], tmp_path)
+    answer = next(c for c in wrong.cells if dc.ANSWER_TAG in c.metadata.get("tags", []))
+    answer.source = answer.source.replace("return", "return 1 + ", 1)
+    (tmp_path / "wrong").mkdir()
+    nbformat.write(wrong, tmp_path / "wrong" / DEMO[1].name)
+    dc.execute_notebook(wrong, tmp_path / "wrong", allow_errors=True)
+    feedback = _check_outputs(wrong)["q1"]
+    assert "tests failed" in feedback and "in: assert" in feedback, feedback
+    assert "Trying:" not in feedback and "Traceback" not in feedback, feedback

@@ -96,6 +96,18 @@ def test_an_executed_check_cell_shows_its_outputs_not_its_code():
     assert tags == ["remove-input", "remove-cell", "remove-cell"]
 
 
+def test_a_widget_without_a_picture_is_replaced_by_a_note():
+    view = {"application/vnd.jupyter.widget-view+json": {"model_id": "1"}, "text/plain": "w"}
+    picture = {**view, "image/png": "iVBORw0KGgo="}
+    cell = nbformat.v4.new_code_cell(
+        "interact(...)",
+        outputs=[nbformat.v4.new_output("display_data", data=d) for d in (view, picture)],
+    )
+    (staged,) = _stage_notebook(nbformat.v4.new_notebook(cells=[cell])).cells
+    assert [o.data.get("image/png") for o in staged.outputs] == [picture["image/png"], None]
+    assert "Interactive in JupyterLab" in staged.outputs[-1].data["text/html"]
+
+
 def _shown(line: str, page: str) -> bool:
     """Whether the words of `line` (two letters or more: not numbers, not one-letter symbols
     that math and code markup split differently) appear in this order in the page's text."""

@@ -17,6 +17,7 @@ from ._exercises import (
     normalize_exercise as normalize_exercise,
     notebook_sources as notebook_sources,
 )
+from ._feedback import NOT_ANSWERED as NOT_ANSWERED, Feedback as Feedback, Notebook as Notebook
 from ._grading import (
     CHECK_TIMEOUT as CHECK_TIMEOUT,
     DEFAULT_TIMEOUT as DEFAULT_TIMEOUT,

@@ -9,8 +9,9 @@ from pathlib import Path
 
 import nbformat
 
+from ._feedback import ANSWERS_KEY, NOT_ANSWERED, answer_names
 from ._notebooks import clean_notebook, notebooks, read_notebook
-from ._otter import SOLUTION_MARKER, assign, hidden_cases
+from ._otter import ANSWER_TAG, SOLUTION_MARKER, assign, hidden_cases
 
 
 def _cell_id(cell: nbformat.NotebookNode, seen: dict[str, int]) -> str:
@@ -19,8 +20,36 @@ def _cell_id(cell: nbformat.NotebookNode, seen: dict[str, int]) -> str:
     return digest if seen[digest] == 1 else f"{digest}-{seen[digest]}"
 
 
+_OTTER_INIT = re.compile(r'# Initialize Otter\nimport otter\ngrader = otter\.Notebook\(("[^"]+")\)')
+_STUB = re.compile(r"^(\s+)\.\.\.$", flags=re.M)
+_CHECK = re.compile(r'grader\.check\("([^"]+)"\)')
+
+
+def _first_cell_sets_up(nb: nbformat.NotebookNode) -> None:
+    """One code cell, after the title, holds the set-up and the grader: running it is all
+    that `grader.check` needs (otter puts its own cell first and the master's set-up later)."""
+    init = next(c for c in nb.cells if c.cell_type == "code" and _OTTER_INIT.fullmatch(c.source))
+    first_question = next(
+        i for i, c in enumerate(nb.cells) if ANSWER_TAG in c.metadata.get("tags", [])
+    )
+    setup = [c for c in nb.cells[:first_question] if c.cell_type == "code" and c is not init]
+    grader = (
+        "from diffnurbs_course import Notebook\n\n"
+        f'grader = Notebook({_OTTER_INIT.fullmatch(init.source)[1]})  # grader.check("q1")'
+    )
+    init.source = "\n\n".join([*(c.source for c in setup), grader])
+    nb.cells = [c for c in nb.cells if c is not init and not any(c is s for s in setup)]
+    title = next(i for i, c in enumerate(nb.cells) if c.cell_type == "markdown")
+    nb.cells.insert(title + 1, init)
+
+
 def normalize_exercise(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
-    """Give a generated student notebook content-derived cell ids, so regeneration is byte-stable.
+    """Shape a generated student notebook as the course hands it out, byte-stable.
+
+    The set-up and the grader go into one code cell after the title; a function body left
+    as `...` raises `NotImplementedError("not answered yet")`, nbgrader's convention, and the
+    names each question's answer defines go into the metadata: the checks then report an
+    unanswered question as such (`Feedback`); cells get content-derived ids.
 
     **Arguments:**
 
@@ -30,6 +59,16 @@ def normalize_exercise(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
 
     The same notebook, cleaned like every committed notebook.
     """
+    _first_cell_sets_up(nb)
+    answers: dict[str, list[str]] = {}
+    names: list[str] = []
+    for cell in nb.cells:
+        if ANSWER_TAG in cell.metadata.get("tags", []):
+            cell.source = _STUB.sub(rf'\1raise NotImplementedError("{NOT_ANSWERED}")', cell.source)
+            names += answer_names(cell.source)
+        elif check := _CHECK.fullmatch(cell.source.strip()):
+            answers[check[1]], names = names, []
+    nb.metadata[ANSWERS_KEY] = answers
     seen: dict[str, int] = {}
     for cell in nb.cells:
         cell.id = _cell_id(cell, seen)

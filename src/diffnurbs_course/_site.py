@@ -66,12 +66,28 @@ def _stage_notebook(nb: nbformat.NotebookNode) -> nbformat.NotebookNode:
         elif _ANSWERS_TAG in tags:  # MyST folds Markdown with a directive, not a tag
             cell.source = f":::{{dropdown}} Answers\n{cell.source}\n:::"
         if cell.cell_type == "code":
-            cell.outputs = [
-                output
-                for output in cell.outputs
-                if not (_WIDGET_VIEW in output.get("data", {}) and "image/png" not in output.data)
-            ]
+            outputs = [output for output in cell.outputs if not _live_only(output)]
+            if len(outputs) < len(cell.outputs):
+                outputs.append(_LIVE_NOTE)
+            cell.outputs = outputs
     return nb
+
+
+def _live_only(output: nbformat.NotebookNode) -> bool:
+    """Whether an output is a widget with no picture of its state (sliders, `interact`)."""
+    data = output.get("data", {})
+    return _WIDGET_VIEW in data and "image/png" not in data
+
+
+_LIVE_NOTE = nbformat.v4.new_output(
+    "display_data",
+    data={
+        "text/html": "<p><em>Interactive in JupyterLab: open this chapter there (make lab) and "
+        "run it to use the controls.</em></p>",
+        "text/plain": "Interactive in JupyterLab.",
+    },
+)
+"""Where a widget without a picture was: the site cannot run it."""
 
 
 def _favicon(path: Path) -> None:

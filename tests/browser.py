@@ -162,28 +162,26 @@ def executed_prompts(page) -> int:
 
 
 def save(page, path: Path) -> None:
-    """Save the open notebook (File > Save Notebook) to `path` and wait until the file holds
-    every execution count the page shows.
-
-    A clean tab alone is not proof: a save that the menu dropped leaves the file as it was
-    (seen once in CI, where the saved chapter then had no execution counts at all).
-    """
+    """Save the open notebook (File > Save Notebook) to `path`; wait until the tab is clean
+    and the file holds every execution count the page shows."""
     shown = executed_prompts(page)
-    for _ in range(3):
-        page.locator("#jp-MainMenu").get_by_text("File", exact=True).click()
-        page.get_by_text("Save Notebook", exact=True).first.click()
-        page.wait_for_function(
-            "() => !document.querySelector('.lm-TabBar-tab.jp-mod-current.jp-mod-dirty')",
-            timeout=60_000,
+    page.locator("#jp-MainMenu").get_by_text("File", exact=True).click()
+    page.get_by_text("Save Notebook", exact=True).first.click()
+    page.wait_for_function(
+        "() => !document.querySelector('.lm-TabBar-tab.jp-mod-current.jp-mod-dirty')",
+        timeout=60_000,
+    )
+    deadline = time.monotonic() + 30
+    while (saved := _executed_cells(path)) < shown:
+        assert time.monotonic() < deadline, (
+            f"{path.name}: the page shows {shown} run, the file {saved}"
         )
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline:
-            nb = nbformat.read(path, as_version=4)
-            saved = sum(c.get("execution_count") is not None for c in nb.cells)
-            if saved >= shown:
-                return
-            page.wait_for_timeout(500)
-    raise AssertionError(f"{path.name}: the page shows {shown} executed cells, the file {saved}")
+        page.wait_for_timeout(500)
+
+
+def _executed_cells(path: Path) -> int:
+    cells = nbformat.read(path, as_version=4).cells
+    return sum(cell.get("execution_count") is not None for cell in cells)
 
 
 def error_outputs(page) -> list[str]:

@@ -4,9 +4,9 @@
 
 The site (Jupyter Book: table of contents, search, math, every chapter and exercise page,
 the code of check cells left out (what they print kept), editors shown as pictures of their
-first state) is written to `<out>/_build/html/index.html`. Exercises are shown unexecuted: they are the student's
-starting point. A chapter that raises is still published, with its traceback; the exit status
-is then 1.
+first state) is written to `<out>/_build/html/index.html`. Exercises are shown unexecuted:
+they are the student's starting point. A chapter that raises is still published, with its
+traceback; the exit status is then 1.
 """
 
 from __future__ import annotations

@@ -7,8 +7,10 @@ and hidden tests stripped and content-derived cell ids, to `exercises/NN_topic.i
 Exercises without a master are removed.
 
     python tools/make_exercises.py [--solutions DIR] [--exercises DIR] [--build DIR] [--check]
+                                   [NN_topic ...]
 
 With `--check` nothing is written: the exit status is 1 when `exercises/` is out of date.
+Naming masters (file stems) limits the run to them.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--exercises", type=Path, default=Path("exercises"))
     parser.add_argument("--build", type=Path, default=Path("build/otter"))
     parser.add_argument("--check", action="store_true", help="only report drift")
+    parser.add_argument("names", nargs="*", help="only these masters (file stems)")
     return parser
 
 
@@ -54,7 +57,7 @@ def _check(master: Path, exercises: Path) -> bool:
 def main(argv: list[str] | None = None) -> int:
     """Generate (or check) every exercise; return the exit status."""
     args = _parser().parse_args(argv)
-    masters = dc.notebooks(args.solutions)
+    masters = [p for p in dc.notebooks(args.solutions) if not args.names or p.stem in args.names]
     stale = [p for p in dc.notebooks(args.exercises) if not (args.solutions / p.name).exists()]
     ok = True
     for master in masters:

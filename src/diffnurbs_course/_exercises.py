@@ -110,8 +110,8 @@ def _first_difference(actual: list[tuple[str, str]], expected: list[tuple[str, s
 def exercise_drift(master: Path, exercise: Path) -> list[str]:
     """How a committed exercise differs from what its master generates now.
 
-    Compares cell types and sources and the otter metadata (public tests, assignment name);
-    cell ids are ignored.
+    Compares cell types and sources, the otter metadata (public tests, assignment name) and
+    the answers' names; cell ids are ignored.
 
     **Arguments:**
 
@@ -132,6 +132,8 @@ def exercise_drift(master: Path, exercise: Path) -> list[str]:
         drift.append(_first_difference(notebook_sources(actual), notebook_sources(expected)))
     if actual.metadata.get("otter") != expected.metadata.get("otter"):
         drift.append("the otter metadata (public tests or assignment name) differs")
+    if actual.metadata.get(ANSWERS_KEY) != expected.metadata.get(ANSWERS_KEY):
+        drift.append(f"the answers' names ({ANSWERS_KEY} metadata) differ")
     return drift
 
 

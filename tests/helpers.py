@@ -109,3 +109,15 @@ def partial_derivative(function, argnum=0):
         return jax.jvp(along, (x,), (jax.numpy.ones_like(x),))[1]
 
     return derivative
+
+
+def central_difference(function, x, h=1e-6):
+    """The gradient of a scalar `function` at `x` (any shape) by central differences: the
+    oracle for gradients that autodiff computes."""
+    x = np.asarray(x, dtype=float)
+    grad = np.zeros_like(x)
+    for index in np.ndindex(x.shape):
+        step = np.zeros_like(x)
+        step[index] = h
+        grad[index] = (function(x + step) - function(x - step)) / (2 * h)
+    return grad

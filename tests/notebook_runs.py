@@ -18,6 +18,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import pytest
+
 import diffnurbs_course as dc
 
 GRADING_TIMEOUT = 900
@@ -155,3 +157,21 @@ def answered(master: Path, work: Path):
         if dc.ANSWER_TAG in cell.metadata.get("tags", []):
             cell.source = solution.source
     return dc.normalize_exercise(student)
+
+
+def graded_exercise(exercise: Path, shared: Path) -> dc.GradeResult:
+    """The grading run of a committed exercise against its master, which must exist.
+
+    **Arguments:**
+
+    - `exercise`: `exercises/NN_topic.ipynb`.
+    - `shared`: `shared_dir(tmp_path_factory)`.
+
+    **Returns:**
+
+    The grading result.
+    """
+    master = LAYOUT.solutions / exercise.name
+    if not master.exists():
+        pytest.fail(f"{exercise.relative_to(ROOT)} has no master {master.relative_to(ROOT)}")
+    return graded(exercise, master, shared)

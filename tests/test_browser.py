@@ -220,7 +220,9 @@ def _answers(page, control) -> None:
     _change(page, control)
     deadline = time.monotonic() + 60
     while _drawings(cell) == before:
-        assert time.monotonic() < deadline, f"{control.inner_text()!r}: nothing redrew"
+        if time.monotonic() > deadline:
+            cell.screenshot(path=BROWSER_OUT / "failure_control.png")
+            raise AssertionError(f"{control.inner_text()!r}: nothing redrew")
         page.wait_for_timeout(200)
 
 

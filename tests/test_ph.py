@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import scipy.integrate
 import scipy.optimize
+from helpers import central_difference
 
 import diffnurbs as dn
 from diffnurbs import ph
@@ -324,16 +325,6 @@ def frame_length(points, tension, index=0, solve=ph.solve_cardinal):
 
 def frame_next_point(points, tension, index=1, solve=ph.solve_cardinal):
     return solve(points[0], points[1], points[2], tension)[1][index].sum()
-
-
-def central_difference(f, x, h=1e-6):
-    x = np.asarray(x, float)
-    grad = np.zeros_like(x)
-    for i in np.ndindex(x.shape):
-        step = np.zeros_like(x)
-        step[i] = h
-        grad[i] = (f(x + step) - f(x - step)) / (2 * h)
-    return grad
 
 
 @pytest.mark.parametrize("quantity", [frame_length, frame_next_point])

@@ -8,19 +8,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import nine_point_circle, random_curve, random_surface
+from helpers import central_difference, nine_point_circle, random_curve, random_surface
 
 import diffnurbs as dn
-
-
-def finite_difference(function, x, h=1e-6):
-    x = np.asarray(x, dtype=float)
-    grad = np.zeros_like(x)
-    for index in np.ndindex(x.shape):
-        step = np.zeros_like(x)
-        step[index] = h
-        grad[index] = (function(x + step) - function(x - step)) / (2 * h)
-    return grad
 
 
 @pytest.fixture
@@ -58,10 +48,10 @@ def test_gradients_match_finite_differences(curve, field):
         def interior_loss(k):
             return float(loss(jnp.asarray(value).at[interior].set(k)))
 
-        expected = finite_difference(interior_loss, value[interior])
+        expected = central_difference(interior_loss, value[interior])
         np.testing.assert_allclose(grad[interior], expected, rtol=1e-5, atol=1e-5)
     else:
-        expected = finite_difference(lambda x: float(loss(jnp.asarray(x))), value)
+        expected = central_difference(lambda x: float(loss(jnp.asarray(x))), value)
         np.testing.assert_allclose(grad, expected, rtol=1e-5, atol=1e-5)
 
 
@@ -103,7 +93,9 @@ def test_surface_gradients_with_respect_to_everything():
     args = (surface.control_points, surface.weights, *surface.knots, u, v)
     grads = jax.jit(jax.grad(loss, argnums=tuple(range(6))))(*args)
     assert all(np.all(np.isfinite(g)) for g in grads)
-    expected = finite_difference(lambda w: float(loss(args[0], jnp.asarray(w), *args[2:])), args[1])
+    expected = central_difference(
+        lambda w: float(loss(args[0], jnp.asarray(w), *args[2:])), args[1]
+    )
     np.testing.assert_allclose(grads[1], expected, rtol=1e-5, atol=1e-6)
 
 

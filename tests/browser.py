@@ -84,7 +84,7 @@ def jupyter_lab(root: Path):
         "JUPYTER_CONFIG_DIR": str(root / ".jupyter-config"),
         "JUPYTERLAB_SETTINGS_DIR": str(root / ".lab-settings"),
         "JUPYTERLAB_WORKSPACES_DIR": str(root / ".lab-workspaces"),
-        # As `make lab` runs it: pyvista figures are rotatable vtk.js views, not PNGs.
+        # As `make lab` runs it (pyvista then still draws PNGs: `viz.use_notebook_backend`).
         "PYVISTA_OFF_SCREEN": "false",
     }
     log = open(root / "jupyter.log", "w")  # noqa: SIM115 (closed below)

@@ -263,11 +263,6 @@ def test_chapter_runs_and_its_widgets_answer(lab, chapter, tmp_path_factory):
         settled_view(page, page.locator(".dn-view").nth(k))
         views.nth(k).screenshot(path=BROWSER_OUT / f"{chapter.stem}_view{k}.png")
         assert views.nth(k).screenshot() != before, f"3D view {k} did not change"
-    # pyvista's rotatable views (vtk.js in an iframe, as `make lab` shows them) draw something.
-    frames = page.locator(".jp-OutputArea-output iframe")
-    for k in range(frames.count()):
-        frames.nth(k).scroll_into_view_if_needed()
-        frames.nth(k).screenshot(path=BROWSER_OUT / f"{chapter.stem}_pyvista{k}.png")
     controls = page.locator(".widget-slider, .widget-toggle-buttons")
     for index in range(controls.count()):
         _answers(page, controls.nth(index))

@@ -62,27 +62,29 @@ def curve_polyline(curve, samples=200):
 
 
 def use_notebook_backend() -> None:
-    """Choose pyvista's Jupyter backend: a static image when executed headless, else interactive.
+    """Make pyvista draw a notebook's 3D figures as PNG images, rendered off screen (EGL).
 
-    Headless means `PYVISTA_OFF_SCREEN=true` (set by `make test` and `make html`); then
-    the figure is a PNG rendered through EGL. In JupyterLab (`make lab`) the "html"
-    backend gives a rotatable vtk.js view. Returns nothing, so that the set-up cell of a
-    chapter prints nothing (the choice is `pyvista.global_theme.jupyter_backend`).
+    The same in JupyterLab (`make lab`), headless runs (`make test`) and the site. pyvista's
+    rotatable views (the trame backends, "html" included) start a trame server in the kernel,
+    which patches the kernel's asyncio loop with `nest_asyncio2`; the next widget callback
+    can then kill the kernel ("pop from an empty deque", ipykernel issue #1250), as moving
+    chapter 12's slider did in the browser tests. A view that must turn or change live is a
+    `diffnurbs.widgets.SurfaceView` instead. Returns nothing, so that the set-up cell of a
+    chapter prints nothing.
     """
     # VTK picks its render window when the first one is made: set it before any render.
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
     pv = import_pyvista()
-    headless = os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true"
-    backend = "static" if headless else "html"
-    pv.set_jupyter_backend(backend)
+    pv.OFF_SCREEN = True  # never a native window, even where no display is set
+    pv.set_jupyter_backend("static")
 
 
 def show(plotter, *captions: str) -> None:
     """Show a pyvista plotter in a notebook with its captions as text above the views, then
     close it.
 
-    pyvista's `add_text` is drawn in static images but not in the rotatable browser views,
-    so captions go into the page instead, one per subplot from left to right. Closing the
+    Captions go into the page as text, one per subplot from left to right, so that the site
+    and a screen reader have them as text. Closing the
     plotter frees its render window: a plotter left open keeps tens of megabytes.
 
     **Arguments:**
@@ -92,20 +94,13 @@ def show(plotter, *captions: str) -> None:
     """
     from IPython.display import HTML, display
 
-    width, height = plotter.window_size
-    # The rotatable view is as wide as the page allows (at the plotter's width it was cut off
-    # on a laptop screen, the right-hand subplot hidden); the static image keeps its size.
-    rotatable = import_pyvista().global_theme.jupyter_backend == "html"
-    page_width = f"min({width}px, 100%)" if rotatable else f"{width}px"
     if captions:
         cells = "".join(
             f"<div style='flex: 1; text-align: center'>{html.escape(text)}</div>"
             for text in captions
         )
-        style = f"display: flex; width: {page_width}; font: 13px sans-serif; white-space: pre-line"
+        width = plotter.window_size[0]
+        style = f"display: flex; width: {width}px; font: 13px sans-serif; white-space: pre-line"
         display(HTML(f"<div style='{style}'>{cells}</div>"))
-    if rotatable:
-        plotter.show(jupyter_kwargs={"width": page_width, "height": f"{height}px"})
-    else:
-        plotter.show()
+    plotter.show()
     plotter.close()

@@ -30,17 +30,23 @@ _UNANSWERED = re.compile(rf"NotImplementedError: {NOT_ANSWERED}|'ellipsis'|ellip
 
 
 def _failure(message: str) -> tuple[str, str]:
-    """`(statement, reason)` of one failed doctest: the example that failed and the last
-    line of its exception (or what it printed against what was expected)."""
+    """`(statement, reason)` of the first failed example of a doctest transcript: the
+    statement and the last line of its exception (or what it printed against what was
+    expected). doctest goes on after a failure, so the transcript's own last line may belong
+    to a later statement ("ok", or an error that only follows from the first one)."""
     lines = message.splitlines()
-    statement = ""
-    if "Failed example:" in lines:
-        statement = lines[lines.index("Failed example:") + 1].strip()
-    if "Expected:" in lines and "Got:" in lines:
-        expected = lines[lines.index("Expected:") + 1].strip()
-        got = lines[lines.index("Got:") + 1].strip()
+    if "Failed example:" not in lines:
+        reasons = [line.strip() for line in lines if line.strip()]
+        return "", reasons[-1] if reasons else "failed"
+    start = lines.index("Failed example:")
+    end = next((i for i in range(start, len(lines)) if lines[i] == "Trying:"), len(lines))
+    block = lines[start:end]
+    statement = block[1].strip() if len(block) > 1 else ""
+    if "Expected:" in block and "Got:" in block:
+        expected = block[block.index("Expected:") + 1].strip()
+        got = block[block.index("Got:") + 1].strip()
         return statement, f"expected {expected}, got {got}"
-    reasons = [line.strip() for line in lines if line.strip()]
+    reasons = [line.strip() for line in block[2:] if line.strip()]
     return statement, reasons[-1] if reasons else "failed"
 
 

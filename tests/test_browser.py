@@ -186,9 +186,11 @@ CODE_CELL = "xpath=ancestor::div[contains(concat(' ', @class, ' '), ' jp-CodeCel
 
 
 def _drawings(cell) -> list:
-    """What a code cell's outputs draw: its figures' images and its editors' lines."""
+    """What a code cell's outputs draw: its figures' images, its editors' lines and how many
+    updates its 3D views have drawn."""
     images = cell.locator(".jp-OutputArea-output img").evaluate_all("xs => xs.map(x => x.src)")
-    return images + _drawn_lines(cell)
+    views = cell.locator(".dn-view").evaluate_all("xs => xs.map(x => x.dataset.updates)")
+    return images + _drawn_lines(cell) + views
 
 
 def _change(page, control) -> None:
@@ -212,7 +214,7 @@ def _answers(page, control) -> None:
     """Change `control`; assert that a drawing of its cell changes."""
     cell = control.locator(CODE_CELL)
     page.wait_for_function(
-        "cell => cell.querySelector('.jp-OutputArea-output img, .dn-editor')",
+        "cell => cell.querySelector('.jp-OutputArea-output img, .dn-editor, .dn-view')",
         arg=cell.element_handle(),
         timeout=60_000,
     )
@@ -263,9 +265,14 @@ def test_chapter_runs_and_its_widgets_answer(lab, chapter, tmp_path_factory):
         settled_view(page, page.locator(".dn-view").nth(k))
         views.nth(k).screenshot(path=BROWSER_OUT / f"{chapter.stem}_view{k}.png")
         assert views.nth(k).screenshot() != before, f"3D view {k} did not change"
+    # Counted again at every step: a control may bring others (the motion editor's operation
+    # shows the sliders of that operation and hides the rest).
     controls = page.locator(".widget-slider, .widget-toggle-buttons")
-    for index in range(controls.count()):
-        _answers(page, controls.nth(index))
+    index = 0
+    while index < controls.count():
+        if controls.nth(index).is_visible():
+            _answers(page, controls.nth(index))
+        index += 1
     if controls.count():
         page.screenshot(path=BROWSER_OUT / f"{chapter.stem}_controls.png")
     assert not error_outputs(page)

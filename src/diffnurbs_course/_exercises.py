@@ -28,10 +28,14 @@ _CHECK = re.compile(r'grader\.check\("([^"]+)"\)')
 def _first_cell_sets_up(nb: nbformat.NotebookNode) -> None:
     """One code cell, after the title, holds the set-up and the grader: running it is all
     that `grader.check` needs (otter puts its own cell first and the master's set-up later)."""
-    init = next(c for c in nb.cells if c.cell_type == "code" and _OTTER_INIT.fullmatch(c.source))
-    first_question = next(
-        i for i, c in enumerate(nb.cells) if ANSWER_TAG in c.metadata.get("tags", [])
-    )
+    inits = [c for c in nb.cells if c.cell_type == "code" and _OTTER_INIT.fullmatch(c.source)]
+    answers = [i for i, c in enumerate(nb.cells) if ANSWER_TAG in c.metadata.get("tags", [])]
+    if len(inits) != 1 or not answers:
+        raise ValueError(
+            f"expected otter's student notebook: one init cell (found {len(inits)}) and answer "
+            f"cells (found {len(answers)}); does the master have `init_cell: true` and questions?"
+        )
+    init, first_question = inits[0], answers[0]
     setup = [c for c in nb.cells[:first_question] if c.cell_type == "code" and c is not init]
     grader = (
         "from diffnurbs_course import Notebook\n\n"

@@ -115,12 +115,16 @@ def wait_for_idle_kernel(page) -> None:
     """Until the open notebook's kernel has started and is idle."""
     page.locator(".jp-Notebook").first.wait_for()
     # JupyterLab may ask which kernel to start (it does when the server is busy starting
-    # the notebook's own): take the one it proposes, the notebook's kernelspec.
+    # the notebook's own): take the one it proposes, the notebook's kernelspec. Whichever
+    # comes first, the question or the idle kernel, is answered at once (waiting a fixed
+    # time for a question that mostly never comes cost seconds per notebook).
     dialog = page.locator(".jp-Dialog").get_by_role("button", name="Select")
-    with contextlib.suppress(PlaywrightTimeout):
-        dialog.click(timeout=5_000)
+    idle = page.locator(".jp-Notebook-ExecutionIndicator[data-status='idle']")
+    dialog.or_(idle).first.wait_for(timeout=120_000)
+    if dialog.is_visible():
+        dialog.click()
     # The kernel must be idle before the cells are sent.
-    page.wait_for_selector(".jp-Notebook-ExecutionIndicator[data-status='idle']", timeout=120_000)
+    idle.wait_for(timeout=120_000)
 
 
 def run_all(page, code_cells: int) -> None:

@@ -7,6 +7,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
+from ._arclength import check_lengths, length_table, parameter_at_length, unit_speed_curve
 from ._basis import basis_funs, combine_local, ders_basis_funs, find_span
 from ._inversion import curve_closest_point
 from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
@@ -246,6 +247,78 @@ class NURBSCurve(AbstractRationalSpline):
             return safe_norm(self._derivatives(u, 1)[..., 1, :])
 
         return integrate_panels(speed, breaks[:-1], breaks[1:])
+
+    @eqx.filter_jit
+    def _length_table(self) -> tuple[Array, Array, Array]:
+        return length_table(self)
+
+    @eqx.filter_jit
+    def _parameter_at_length(self, s: Array, table: tuple[Array, Array, Array]) -> Array:
+        return parameter_at_length(self, s, table)
+
+    def parameter_at_length(self, s: ArrayLike) -> Float[Array, "..."]:
+        """The parameter `u` at arc length `s` from the start: the inverse of `arc_length`,
+        `arc_length(lower, u) = s` to rounding (relative `1e-12` or better).
+
+        The length is tabulated on the quadrature panels of `arc_length` and inverted in its
+        panel by safeguarded Newton steps (see `_arclength`). `jax.grad` reaches `s`
+        (`du/ds = 1 / |C'(u)|`) and the curve (implicit function theorem).
+
+        **Arguments:**
+
+        - `s`: lengths of any shape, in `[0, L]`, `L` the curve's length; concrete values
+          outside raise `ValueError`.
+
+        **Returns:**
+
+        Parameters of the shape of `s`. Where the curve stands still over an interval, the
+        first parameter of that interval.
+        """
+        s = jnp.asarray(s, dtype=self.knots.dtype)
+        table = self._length_table()
+        check_lengths(s, table[2][-1])
+        return self._parameter_at_length(s, table)
+
+    def equal_arc_parameters(self, count: int) -> Float[Array, " count"]:
+        """`count` parameters, both ends included, that cut the curve into `count - 1` pieces
+        of equal length (constant-feed machining, animation at constant speed).
+
+        **Arguments:**
+
+        - `count`: the number of parameters, `>= 2`.
+
+        **Returns:**
+
+        Increasing parameters from the start to the end of the domain, shape `(count,)`.
+        """
+        count = check_degree(count, minimum=2, name="count")
+        table = self._length_table()
+        s = jnp.linspace(0.0, 1.0, count, dtype=self.knots.dtype) * table[2][-1]
+        lower, upper = self.domain
+        return self._parameter_at_length(s, table).at[0].set(lower).at[-1].set(upper)
+
+    def reparametrize_by_arc_length(self, tol: float = 1e-6) -> "NURBSCurve":
+        """A cubic B-spline `R(s)` on `[0, L]` with unit speed within `tol`, tracing this curve.
+
+        `R` interpolates the curve's points and unit tangents at lengths chosen adaptively
+        (a C^1 piecewise cubic Hermite curve, double interior knots) until, on every piece,
+        `| |R'(s)| - 1 | <= tol` and `|R(s) - C(u(s))| <= tol L`. Needs concrete control
+        points, weights and knots (the number of pieces depends on them); the control points
+        of the result are differentiable with respect to the curve.
+
+        **Arguments:**
+
+        - `tol`: the bound on both errors, `> 0`.
+
+        **Returns:**
+
+        The unit-speed `NURBSCurve` (non-rational, degree 3).
+        """
+        if not (isinstance(tol, (int, float)) and tol > 0):
+            raise ValueError(f"tol must be a positive number, got {tol!r}")
+        if concrete(self.knots) is None or concrete(self.control_points) is None:
+            raise ValueError("reparametrize_by_arc_length needs a concrete curve (not traced)")
+        return unit_speed_curve(self, tol, self._length_table())
 
     def closest_point(
         self, point: ArrayLike, samples_per_span: int | None = None

@@ -18,15 +18,18 @@ term by term (eq. 8) gives the direct problem (eq. 9):
 """
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
+from ._arclength import increasing_root
 from ._bezier import bezier_matrix, subdivide
 from ._cubic import hermite_segment
 from ._curve import NURBSCurve
+from ._misc import safe_divide
 from ._rational import from_homogeneous
-from ._validate import check_finite, check_parameter, concrete, float_dtype
+from ._validate import check_degree, check_finite, check_parameter, concrete, float_dtype
 
 
 def as_coeffs(coeffs: ArrayLike, batched: bool = True) -> Array:
@@ -156,6 +159,81 @@ def arc_length(coeffs: ArrayLike) -> Float[Array, "..."]:
     coeffs = as_coeffs(coeffs)
     a0, a1, b0, b1 = (coeffs[..., k] for k in range(4))
     return a0**2 + b0**2 + (a0 * a1 + b0 * b1) + (a1**2 + b1**2) / 3
+
+
+def parameter_at_length(coeffs: ArrayLike, s: ArrayLike) -> Float[Array, "..."]:
+    """The parameter at arc length `s` from the start of the PH cubic, exactly: the root in
+    [0, 1] of the cubic polynomial `s(u) = c0 u + c1 u^2 / 2 + c2 u^3 / 3`, the integral of
+    the speed `c0 + c1 u + c2 u^2 = f^2 + v^2`. No quadrature: Newton's method on the
+    polynomial (safeguarded by bisection where the speed vanishes), to rounding.
+    `jax.grad` reaches `s` and `coeffs` (implicit function theorem).
+
+    **Arguments:**
+
+    - `coeffs`: `(a0, a1, b0, b1)`, shape `(..., 4)`.
+    - `s`: lengths in `[0, arc_length(coeffs)]`; `coeffs[..., k]` and `s` broadcast together.
+
+    **Returns:**
+
+    The parameters, shape `broadcast(coeffs.shape[:-1], s.shape)`.
+    """
+    coeffs = as_coeffs(coeffs)
+    s = jnp.asarray(s, dtype=coeffs.dtype)
+    total = arc_length(coeffs)
+    values, lengths = concrete(s), concrete(total)
+    if values is not None and lengths is not None:
+        values, lengths = np.broadcast_arrays(values, lengths)
+        outside = ~((values >= 0) & (values <= lengths * (1 + 1e-12)))
+        if np.any(outside):
+            where = tuple(int(i) for i in np.argwhere(outside)[0])
+            raise ValueError(
+                f"s must lie in [0, {lengths[where]}] (0 to the curve's length), "
+                f"got {values[where]}" + (f" at index {where}" if where else "")
+            )
+    a0, a1, b0, b1 = (coeffs[..., k] for k in range(4))
+    c0, c1, c2 = a0**2 + b0**2, 2 * (a0 * a1 + b0 * b1), a1**2 + b1**2
+    c0, c1, c2, s, total = jnp.broadcast_arrays(c0, c1, c2, s, total)
+
+    def length(u, c0, c1, c2):
+        return u * (c0 + u * (c1 / 2 + u * c2 / 3))
+
+    def speed(u, c0, c1, c2):
+        return c0 + u * (c1 + u * c2)
+
+    fixed = [jax.lax.stop_gradient(x) for x in (c0, c1, c2, s)]
+    tolerance = 8 * jnp.finfo(s.dtype).eps * jnp.maximum(jax.lax.stop_gradient(total), 1.0)
+    u = increasing_root(
+        lambda u: length(u, *fixed[:3]) - fixed[3],
+        lambda u: speed(u, *fixed[:3]),
+        jnp.clip(safe_divide(fixed[3], jax.lax.stop_gradient(total)), 0.0, 1.0),
+        jnp.zeros_like(s),
+        jnp.ones_like(s),
+        tolerance,
+    )
+    # One more Newton step, outside the loop: its derivative is the implicit-function one.
+    u = u - safe_divide(length(u, c0, c1, c2) - s, speed(u, c0, c1, c2))
+    return jnp.where(u < 0, 0.0, jnp.where(u > 1, 1.0, u))
+
+
+def equal_arc_parameters(coeffs: ArrayLike, count: int) -> Float[Array, "... count"]:
+    """`count` parameters, both ends included, that cut the PH cubic into pieces of equal
+    length, exactly (`parameter_at_length`; no quadrature).
+
+    **Arguments:**
+
+    - `coeffs`: `(a0, a1, b0, b1)`, shape `(..., 4)`.
+    - `count`: the number of parameters, `>= 2`.
+
+    **Returns:**
+
+    Increasing parameters from 0 to 1, shape `coeffs.shape[:-1] + (count,)`.
+    """
+    count = check_degree(count, minimum=2, name="count")
+    coeffs = as_coeffs(coeffs)
+    fractions = jnp.linspace(0.0, 1.0, count, dtype=coeffs.dtype)
+    s = arc_length(coeffs)[..., None] * fractions
+    u = parameter_at_length(coeffs[..., None, :], s)
+    return u.at[..., 0].set(0.0).at[..., -1].set(1.0)
 
 
 def ph_cubic(coeffs: ArrayLike, start: ArrayLike) -> NURBSCurve:

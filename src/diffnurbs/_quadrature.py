@@ -26,24 +26,24 @@ def _panel_ends(lo, hi, owner, start, stop):
     return lo[owner] + start * width, lo[owner] + stop * width
 
 
-def integrate_panels(integrand, lo, hi, rounds=8):
-    """Sum of the integrals of `integrand` over the panels `[lo_i, hi_i]`, refined adaptively.
+def refined_panels(integrand, lo, hi, rounds=8):
+    """The sub-panels of `[lo_i, hi_i]` after adaptive bisection, as two arrays of ends.
 
     Each round bisects the `len(lo)` sub-panels with the largest error estimate, so a
     panel holding a sharp feature is halved once per round. Sub-panels are kept as
-    fractions of the original panels: the refinement is a discrete choice, and the final
-    sum stays a smooth function of `lo`, `hi` and the integrand, so `grad` is exact.
-    Array sizes depend only on `len(lo)` and `rounds`, so the rule works under `jit`.
+    fractions of the original panels: the refinement is a discrete choice, and integrals
+    over the sub-panels stay smooth functions of `lo`, `hi` and the integrand, so `grad`
+    is exact. Array sizes depend only on `len(lo)` and `rounds`, so this works under `jit`.
 
     **Arguments:**
 
     - `integrand`: vectorised function of the parameters, any shape to the same shape.
-    - `lo`, `hi`: 1-D arrays of panel ends (empty panels contribute zero).
+    - `lo`, `hi`: 1-D arrays of panel ends (empty panels stay empty).
     - `rounds`: number of refinement rounds.
 
     **Returns:**
 
-    The scalar integral.
+    `(a, b)`: the `len(lo) * (rounds + 1)` sub-panels' ends, in no particular order.
     """
     count = lo.shape[0]
     size = count * (rounds + 1)
@@ -65,4 +65,34 @@ def integrate_panels(integrand, lo, hi, rounds=8):
     owner, start, stop = jax.lax.stop_gradient(
         jax.lax.fori_loop(0, rounds, refine, (owner, start, stop))
     )
-    return jnp.sum(_halves(integrand, *_panel_ends(lo, hi, owner, start, stop))[0])
+    return _panel_ends(lo, hi, owner, start, stop)
+
+
+def panel_integrals(integrand, a, b):
+    """The integral of `integrand` over each panel `[a_i, b_i]` (two 16-point rules, one
+    per half)."""
+    return _halves(integrand, a, b)[0]
+
+
+def integrate_panels(integrand, lo, hi, rounds=8):
+    """Sum of the integrals of `integrand` over the panels `[lo_i, hi_i]`, refined adaptively
+    (`refined_panels`).
+
+    **Arguments:**
+
+    - `integrand`: vectorised function of the parameters, any shape to the same shape.
+    - `lo`, `hi`: 1-D arrays of panel ends (empty panels contribute zero).
+    - `rounds`: number of refinement rounds.
+
+    **Returns:**
+
+    The scalar integral.
+    """
+    return jnp.sum(panel_integrals(integrand, *refined_panels(integrand, lo, hi, rounds)))
+
+
+def gauss_legendre(integrand, a, b):
+    """The 16-point Gauss-Legendre rule on each interval `[a_i, b_i]` (arrays of one shape)."""
+    nodes = jnp.asarray((_NODES + 1) / 2, dtype=a.dtype)
+    x = a[..., None] + (b - a)[..., None] * nodes
+    return 0.5 * (b - a) * (integrand(x) @ jnp.asarray(_WEIGHTS, dtype=a.dtype))

@@ -14,8 +14,10 @@ Seed 004 writes the cubic as the segment of a cardinal spline (tension `t`,
 - the direct problem (eq. 9): `cardinal_points(coeffs, p_prev, tension)`;
 - the inverse problem (eq. 8): `solve_cardinal(p_prev, p_k, p_next, tension)`, numerically
   with optimistix, and `solve_cardinal_closed_form`; two distinct curves in general;
-- `arc_length(coeffs)` (exact), `speed(coeffs, u)`, `ph_cubic(coeffs, start)` and
-  `cardinal_curve(coeffs, p_prev, tension)` (the segment as a `NURBSCurve`);
+- `arc_length(coeffs)` (exact), `parameter_at_length(coeffs, s)` and
+  `equal_arc_parameters(coeffs, count)` (its exact inverse, a polynomial root),
+  `speed(coeffs, u)`, `ph_cubic(coeffs, start)` and `cardinal_curve(coeffs, p_prev, tension)`
+  (the segment as a `NURBSCurve`);
 - `cardinal_chain(p0, p1, p2, segments, tension, choices)`: a spline marched segment by
   segment, `fit_cardinal(points, tension)`: the PH segment nearest four points;
 - `quintic_hermite(p0, p1, d0, d1)`: the four PH quintic Hermite interpolants;
@@ -36,7 +38,9 @@ from ._ph_cubic import (
     arc_length as arc_length,
     cardinal_curve as cardinal_curve,
     cardinal_points as cardinal_points,
+    equal_arc_parameters as equal_arc_parameters,
     offset_curve as offset_curve,
+    parameter_at_length as parameter_at_length,
     ph_cubic as ph_cubic,
     speed as speed,
 )

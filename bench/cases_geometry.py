@@ -1,6 +1,6 @@
 """Benchmark cases of the geometry toolkit: a surface of revolution evaluated and
 tessellated to 10^6 points, a kinematic sweep on a 500 x 500 grid, knot refinement with
-10^3 knots.
+10^3 knots, 10^6 parameters at equal arc length.
 
 splipy revolves and refines too and geomdl refines, so those are timed side by side and
 their results compared with diffnurbs's; the tessellation (a pyvista mesh) and the
@@ -16,6 +16,7 @@ import splipy
 import splipy.surface_factory
 from cases import Case, Impl
 from geomdl import helpers
+from scipy import integrate, interpolate, optimize
 
 import diffnurbs as dn
 from diffnurbs import io
@@ -24,6 +25,8 @@ SIDE = 1000  # revolve: SIDE x SIDE points
 SWEEP_SIDE = 500
 REFINE_KNOTS = 1000
 GEOMDL_KNOTS = 100  # pure Python: the first knots only
+EQUAL_ARC = 10**6
+SCIPY_ARC = 200  # quad inside brentq per parameter: the first ones only
 
 
 def _ready(x):
@@ -142,10 +145,44 @@ def refinement_case(rng: np.random.Generator) -> Case:
     )
 
 
+def equal_arc_case(rng: np.random.Generator) -> Case:
+    """Parameters at equal arc length. No peer has the inverse of the arc length; with scipy
+    a user writes it: `brentq` on `quad` of the speed of scipy's B-spline derivative."""
+    points = np.cumsum(rng.normal(size=(100, 3)), axis=0)
+    curve = dn.NURBSCurve(points, 3)
+    equal = jax.jit(lambda c: c.equal_arc_parameters(EQUAL_ARC))
+    reference = np.asarray(equal(curve))
+    velocity = interpolate.BSpline(np.asarray(curve.knots), points, 3).derivative()
+    breaks = np.unique(np.asarray(curve.knots))
+
+    def length(u):
+        inside = breaks[(breaks > 0) & (breaks < u)]
+        return integrate.quad(lambda t: np.linalg.norm(velocity(t)), 0.0, u,
+                              points=inside if len(inside) else None, limit=200)[0]  # fmt: skip
+
+    def scipy_equal():
+        total = length(1.0)
+        targets = np.arange(SCIPY_ARC) * total / (EQUAL_ARC - 1)
+        return [optimize.brentq(lambda u, s=s: length(u) - s, 0.0, 1.0, xtol=1e-14)
+                if s > 0 else 0.0 for s in targets]  # fmt: skip
+
+    return Case(
+        f"19. {EQUAL_ARC:,} parameters at equal arc length, cubic with 100 control points",
+        {
+            "diffnurbs": Impl(lambda: _ready(equal(curve)), EQUAL_ARC, reference),
+            "scipy": Impl(scipy_equal, SCIPY_ARC, reference[:SCIPY_ARC]),
+            "splipy": "no inverse arc length",
+            "geomdl": "no inverse arc length",
+        },
+        {"scipy": 1},
+    )
+
+
 def cases(rng: np.random.Generator) -> list[Case]:
     return [
         revolve_case(rng),
         tessellate_case(rng),
         kinematic_sweep_case(rng),
         refinement_case(rng),
+        equal_arc_case(rng),
     ]

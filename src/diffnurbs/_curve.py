@@ -5,12 +5,14 @@ import typing
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._arclength import check_lengths, length_table, parameter_at_length, unit_speed_curve
 from ._basis import basis_funs, combine_local, ders_basis_funs, find_span
 from ._inversion import curve_closest_point
 from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
+from ._knotremoval import check_tolerance, homogeneous_tolerance, remove, simplify
 from ._knots import clamped_knots
 from ._misc import clamp_to_domain, safe_divide, safe_norm, safe_normalize, safe_sqrt
 from ._quadrature import integrate_panels
@@ -110,6 +112,65 @@ class NURBSCurve(AbstractRationalSpline):
         homogeneous = self.homogeneous_points()
         points, knots = checked_refinement(homogeneous, self.knots, self.degree, values)
         return self._from_homogeneous_points(points, knots)
+
+    def remove_knot(
+        self, u: float, times: int = 1, tol: float | None = None
+    ) -> tuple["NURBSCurve", int]:
+        """The curve with the interior knot `u` removed up to `times` times, as often as the
+        curve moves by at most `tol` (NURBS Book A5.8): the inverse of `insert_knot`.
+
+        **Arguments:**
+
+        - `u`: an interior knot.
+        - `times`: how many copies to try to remove (at most its multiplicity).
+        - `tol`: how far the curve may move; None: `1e-12 (1 + max |P|)`, only exact
+          removal (a knot that insertion added); `inf`: remove `times` copies whatever
+          the change (then the control points may be traced, and `jax.grad` reaches them).
+
+        **Returns:**
+
+        `(curve, removed)`: the new curve and how many copies were removed.
+        """
+        knots = concrete(self.knots)
+        if knots is None:
+            raise ValueError("remove_knot needs concrete knots: they decide what is removed")
+        times = check_degree(times, minimum=1, name="times")
+        homogeneous = self.homogeneous_points()
+        if tol is None:
+            values = concrete(self.control_points)
+            if values is None:
+                raise ValueError("remove_knot needs concrete control points unless tol = inf")
+            tol = 1e-12 * (1 + float(np.max(np.abs(values))))
+        tol = check_tolerance(tol)
+        if np.isfinite(tol):
+            values = concrete(homogeneous)
+            if values is None:
+                raise ValueError("remove_knot with a finite tol needs concrete control points")
+            tol = homogeneous_tolerance(values, self.rational, tol)
+        rows, new_knots, removed, _ = remove(
+            list(homogeneous), knots, self.degree, float(u), times, tol
+        )
+        if removed == 0:
+            return self, 0
+        return self._from_homogeneous_points(jnp.stack(rows), jnp.asarray(new_knots)), removed
+
+    def simplify(self, tol: float) -> "NURBSCurve":
+        """The curve with every knot removed that can go while the curve stays within `tol`
+        of this one (the bound of each removal summed per span; see `_knotremoval`).
+
+        **Arguments:**
+
+        - `tol`: how far the simplified curve may be from this one, `> 0`.
+
+        **Returns:**
+
+        The simplified `NURBSCurve` (the same degree; concrete control points and knots).
+        """
+        knots, points = concrete(self.knots), concrete(self.homogeneous_points())
+        if knots is None or points is None:
+            raise ValueError("simplify needs a concrete curve (not traced)")
+        points, knots = simplify(points, knots, self.degree, self.rational, check_tolerance(tol))
+        return self._from_homogeneous_points(jnp.asarray(points), jnp.asarray(knots))
 
     def elevate_degree(self, times: int = 1) -> "NURBSCurve":
         """The same curve with its degree raised by `times`: every knot of the domain

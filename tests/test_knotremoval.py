@@ -1,8 +1,10 @@
-"""Knot removal (NURBS Book A5.8) and `simplify`.
+"""Knot removal (NURBS Book A5.8), `simplify` and degree reduction, of curves and of
+surfaces in either direction.
 
-Oracles: knot insertion (removal must give back exactly the curve that insertion started
-from, control points and knots), the tolerance itself (the curve, sampled densely, moves by
-at most `tol`), finite differences for the forced removal's gradient.
+Oracles: knot insertion and degree elevation (removal and reduction must give back exactly
+what they started from, control points and knots), the tolerance itself (the curve or
+surface, sampled densely, moves by at most `tol`), finite differences for the forced
+removal's gradient.
 """
 
 import jax
@@ -120,3 +122,55 @@ KNOTS, KNOT = np.asarray(CURVE.knots), float(CURVE.knots[5])
 def test_bad_input_is_named(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+@pytest.mark.parametrize("rational", [False, True])
+@pytest.mark.parametrize("degree", [2, 3, 4])
+def test_reduction_undoes_elevation(degree, rational):
+    curve = random_curve(10 + degree, degree, rational)
+    back = curve.elevate_degree(1).reduce_degree()
+    assert back.degree == degree
+    np.testing.assert_allclose(back.knots, curve.knots, atol=0)
+    np.testing.assert_allclose(back.control_points, curve.control_points, atol=1e-12)
+
+
+def test_reduction_within_a_tolerance():
+    curve = random_curve(20, 3, rational=False).refine(np.linspace(0.05, 0.95, 30))
+    tol = 1e-2
+    lower = curve.reduce_degree(tol)
+    assert lower.degree == 2
+    assert np.linalg.norm(lower(U) - curve(U), axis=1).max() <= tol
+    with pytest.raises(ValueError, match=r"no curve of degree 2 is within tol = 0\.001"):
+        curve.reduce_degree(1e-3)
+    line = dn.NURBSCurve(np.eye(2), 1)
+    with pytest.raises(ValueError, match="needs degree >= 2"):
+        line.reduce_degree(1.0)
+
+
+@pytest.mark.parametrize("direction", ["u", "v"])
+def test_surfaces_in_either_direction(direction):
+    rng = np.random.default_rng(30)
+    surface = dn.NURBSSurface(
+        rng.normal(size=(6, 5, 3)), (3, 2), weights=rng.uniform(0.5, 2.0, (6, 5))
+    )
+    inserted = surface.insert_knot(0.3, 2, direction=direction)
+    back, removed = inserted.remove_knot(0.3, 2, direction=direction)
+    assert removed == 2
+    np.testing.assert_allclose(back.control_points, surface.control_points, atol=1e-12)
+    elevated = surface.elevate_degree(1, direction=direction)
+    lowered = elevated.reduce_degree(direction=direction)
+    assert lowered.degree == surface.degree
+    np.testing.assert_allclose(lowered.control_points, surface.control_points, atol=1e-12)
+    refined = surface.refine(np.linspace(0.1, 0.9, 9), direction=direction)
+    simple = refined.simplify(1e-9, direction=direction)
+    np.testing.assert_allclose(simple.knots_u, surface.knots_u, atol=0)
+    np.testing.assert_allclose(simple.knots_v, surface.knots_v, atol=0)
+    np.testing.assert_allclose(simple.weights, surface.weights, atol=1e-12)
+    # Within a tolerance: fewer control points, and no point of the surface moves more.
+    x, y = np.meshgrid(np.linspace(0, 1, 30), np.linspace(0, 1, 30), indexing="ij")
+    wavy = dn.interpolate_surface(np.stack([x, y, np.sin(3 * (x + y))], axis=-1), (3, 3))
+    tol = 1e-3
+    lighter = wavy.simplify(tol, direction=direction)
+    assert lighter.control_points.size < wavy.control_points.size
+    uu, vv = np.meshgrid(np.linspace(0, 1, 101), np.linspace(0, 1, 101), indexing="ij")
+    assert np.linalg.norm(lighter(uu, vv) - wavy(uu, vv), axis=-1).max() <= tol

@@ -12,7 +12,7 @@ from ._arclength import check_lengths, length_table, parameter_at_length, unit_s
 from ._basis import basis_funs, combine_local, ders_basis_funs, find_span
 from ._inversion import curve_closest_point
 from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
-from ._knotremoval import check_tolerance, homogeneous_tolerance, remove, simplify
+from ._knotremoval import check_tolerance, homogeneous_tolerance, reduce, remove, simplify
 from ._knots import clamped_knots
 from ._misc import clamp_to_domain, safe_divide, safe_norm, safe_normalize, safe_sqrt
 from ._quadrature import integrate_panels
@@ -171,6 +171,34 @@ class NURBSCurve(AbstractRationalSpline):
             raise ValueError("simplify needs a concrete curve (not traced)")
         points, knots = simplify(points, knots, self.degree, self.rational, check_tolerance(tol))
         return self._from_homogeneous_points(jnp.asarray(points), jnp.asarray(knots))
+
+    def reduce_degree(self, tol: float | None = None) -> "NURBSCurve":
+        """The curve of one degree less within `tol` of this one: the inverse of
+        `elevate_degree` (see `_knotremoval.reduce`; concrete curve, clamped knots).
+
+        **Arguments:**
+
+        - `tol`: how far the reduced curve may be; None: `1e-12 (1 + max |P|)`, only exact
+          reduction (a curve that degree elevation made).
+
+        **Returns:**
+
+        The `NURBSCurve` of degree `p - 1`, its knots as few as `tol` allows. Raises
+        `ValueError` when no curve of degree `p - 1` is within `tol`.
+        """
+        if self.degree < 2:
+            raise ValueError("reduce_degree needs degree >= 2: there is no degree 0 curve")
+        knots, points = concrete(self.knots), concrete(self.homogeneous_points())
+        if knots is None or points is None:
+            raise ValueError("reduce_degree needs a concrete curve (not traced)")
+        if tol is None:
+            tol = 1e-12 * (1 + float(np.max(np.abs(concrete(self.control_points)))))
+        tol = check_tolerance(tol)
+        points, knots, error = reduce(points, knots, self.degree, self.rational, tol)
+        points, knots = simplify(points, knots, self.degree - 1, self.rational, tol, error)
+        return self._from_homogeneous_points(
+            jnp.asarray(points), jnp.asarray(knots), self.degree - 1
+        )
 
     def elevate_degree(self, times: int = 1) -> "NURBSCurve":
         """The same curve with its degree raised by `times`: every knot of the domain

@@ -175,7 +175,7 @@ def greville(knots, degree):
     return sum(knots[1 + j : 1 + j + n_control] for j in range(degree)) / degree
 
 
-def _concrete_knots(knots, operation):
+def concrete_knots(knots, operation):
     values = concrete(knots)
     if values is None:
         raise ValueError(
@@ -197,7 +197,7 @@ def clamp(points, knots, degree):
 
     `(points, knots)`, fewer of each when the knots extended beyond the domain.
     """
-    values = _concrete_knots(knots, "clamping")
+    values = concrete_knots(knots, "clamping")
     a, b = values[degree], values[-degree - 1]
     missing = [max(degree - int(np.sum(values == end)), 0) for end in (a, b)]
     points, knots = insert(points, knots, degree, np.repeat([a, b], missing))
@@ -246,7 +246,7 @@ def elevate(points, knots, degree, times):
 
     `(points, knots)` of degree `p + times`, with clamped knots.
     """
-    _concrete_knots(knots, "degree elevation")
+    concrete_knots(knots, "degree elevation")
     points, knots = clamp(points, knots, degree)
     values = np.asarray(knots)
     # The first knot of every run of p + 1 equal ones inside the domain starts a piece.

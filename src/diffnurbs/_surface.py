@@ -6,11 +6,19 @@ import typing
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, combine_local, dense_basis, ders_basis_funs, local_indices
 from ._inversion import surface_closest_point
-from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
+from ._knotops import (
+    bezier_pieces,
+    checked_insertion,
+    checked_refinement,
+    concrete_knots,
+    elevate,
+)
+from ._knotremoval import check_tolerance, homogeneous_tolerance, reduce, remove, simplify
 from ._knots import clamped_knots
 from ._misc import clamp_to_domain, safe_norm, safe_normalize
 from ._rational import AbstractRationalSpline, from_homogeneous, rational_surface_derivatives
@@ -26,6 +34,7 @@ from ._validate import (
     check_parameter,
     check_rank,
     check_weights,
+    concrete,
     float_dtype,
 )
 
@@ -353,6 +362,71 @@ class NURBSSurface(AbstractRationalSpline, AbstractSurface):
         (see `NURBSCurve.elevate_degree`)."""
         times = check_degree(times, minimum=1, name="times")
         return self._along(direction, lambda points, knots, p: elevate(points, knots, p, times))
+
+    def _tolerance(self, tol: float | None) -> float:
+        """`tol` checked; None: `1e-12 (1 + max |P|)` (only exact changes); needs a concrete net."""
+        values = concrete(self.control_points)
+        if values is None:
+            raise ValueError("this operation needs a concrete surface (not traced)")
+        return check_tolerance(1e-12 * (1 + float(np.max(np.abs(values)))) if tol is None else tol)
+
+    def remove_knot(
+        self, value: float, times: int = 1, tol: float | None = None, *, direction: str = "u"
+    ) -> tuple["NURBSSurface", int]:
+        """The surface with the knot `value` removed up to `times` times along `direction`,
+        as often as every row (or column) of the net allows within `tol` (NURBS Book A5.8 on
+        whole rows; see `NURBSCurve.remove_knot`, whose `tol` conventions it shares).
+
+        **Returns:**
+
+        `(surface, removed)`.
+        """
+        times = check_degree(times, minimum=1, name="times")
+        tol = self._tolerance(tol)
+        removed = 0
+
+        def operation(points, knots, degree):
+            nonlocal removed
+            values = np.asarray(points)
+            scaled = homogeneous_tolerance(values, self.rational, tol)
+            rows, knots, removed, _ = remove(
+                list(values), concrete_knots(knots, "knot removal"), degree, float(value),
+                times, scaled,
+            )  # fmt: skip
+            return jnp.asarray(np.stack(rows)), jnp.asarray(knots)
+
+        surface = self._along(direction, operation)
+        return (surface, removed) if removed else (self, 0)
+
+    def simplify(self, tol: float, *, direction: str = "u") -> "NURBSSurface":
+        """The surface with every knot along `direction` removed that can go while the
+        surface stays within `tol` (see `NURBSCurve.simplify`)."""
+        tol = self._tolerance(tol)
+
+        def operation(points, knots, degree):
+            points, knots = simplify(
+                np.asarray(points), concrete_knots(knots, "simplify"), degree, self.rational, tol
+            )
+            return jnp.asarray(points), jnp.asarray(knots)
+
+        return self._along(direction, operation)
+
+    def reduce_degree(self, tol: float | None = None, *, direction: str = "u") -> "NURBSSurface":
+        """The surface of one degree less along `direction` within `tol` of this one: the
+        inverse of `elevate_degree` (see `NURBSCurve.reduce_degree`)."""
+        if self.degree[direction == "v"] < 2:
+            raise ValueError(f"reduce_degree needs degree >= 2 along {direction}")
+        tol = self._tolerance(tol)
+
+        def operation(points, knots, degree):
+            points, knots, error = reduce(
+                np.asarray(points), concrete_knots(knots, "degree reduction"), degree,
+                self.rational, tol,
+            )  # fmt: skip
+            points, knots = simplify(points, knots, degree - 1, self.rational, tol, error)
+            return jnp.asarray(points), jnp.asarray(knots)
+
+        return self._along(direction, operation)
 
     def decompose(self) -> list[list["NURBSSurface"]]:
         """The Bezier patches of the surface, `patches[i][j]` on the i-th u and j-th v span."""

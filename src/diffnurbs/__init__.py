@@ -83,6 +83,7 @@ from ._rational import (
     to_homogeneous as to_homogeneous,
 )
 from ._shapes import arc as arc, circle as circle, ellipse as ellipse
+from ._skinning import gordon as gordon, loft as loft
 from ._surface import AbstractSurface as AbstractSurface, NURBSSurface as NURBSSurface
 
 __version__ = "0.1.0"

@@ -20,8 +20,9 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._curve import NURBSCurve
-from ._knotops import greville, merged_knots, missing_knots
+from ._knotops import greville
 from ._misc import clamp_to_domain, safe_norm
+from ._skinning import compatible, on_unit_domain
 from ._surface import (
     AbstractSurface,
     NURBSSurface,
@@ -200,7 +201,7 @@ class CoonsPatch(AbstractSurface):
 
     def _sampling(self):
         def along(a, b):  # the knots of two opposite curves on [0, 1], as for a degree-p net
-            breaks = [_on_unit_domain(c).knots[c.degree : -c.degree] for c in (a, b)]
+            breaks = [on_unit_domain(c).knots[c.degree : -c.degree] for c in (a, b)]
             return jnp.sort(jnp.concatenate(breaks)), max(a.degree, b.degree) + 2
 
         return along(self.c0, self.c1), along(self.d0, self.d1)
@@ -225,27 +226,11 @@ class CoonsPatch(AbstractSurface):
                 "the blend of rational curves has the product of their weight functions as "
                 "denominator; evaluate the CoonsPatch directly instead"
             )
-        c0, c1 = _compatible(self.c0, self.c1)
-        d0, d1 = _compatible(self.d0, self.d1)
+        c0, c1 = compatible(self.c0, self.c1)
+        d0, d1 = compatible(self.d0, self.d1)
         xi = greville(c0.knots, c0.degree)[:, None, None]
         eta = greville(d0.knots, d0.degree)[None, :, None]
         cu0, cu1 = (c.control_points[:, None, :] for c in (c0, c1))
         dv0, dv1 = (d.control_points[None, :, :] for d in (d0, d1))
         points = self._blend(cu0, cu1, dv0, dv1, xi, eta)
         return NURBSSurface(points, (c0.degree, d0.degree), (c0.knots, d0.knots))
-
-
-def _on_unit_domain(curve: NURBSCurve) -> NURBSCurve:
-    """The same curve with its knots mapped linearly onto the domain [0, 1]."""
-    lower, upper = curve.domain
-    knots = (curve.knots - lower) / (upper - lower)
-    return NURBSCurve(curve.control_points, curve.degree, knots, curve.weights)
-
-
-def _compatible(a: NURBSCurve, b: NURBSCurve) -> tuple[NURBSCurve, NURBSCurve]:
-    """`a` and `b` on [0, 1] with one degree and one knot vector, shapes unchanged."""
-    a, b = _on_unit_domain(a), _on_unit_domain(b)
-    degree = max(a.degree, b.degree)
-    a, b = (c if c.degree == degree else c.elevate_degree(degree - c.degree) for c in (a, b))
-    target = merged_knots(np.asarray(a.knots), np.asarray(b.knots))
-    return tuple(c.refine(missing_knots(np.asarray(c.knots), target)) for c in (a, b))

@@ -66,6 +66,7 @@ from ._interpolate import (
     interpolate as interpolate,
     interpolate_surface as interpolate_surface,
 )
+from ._intersect import curve_intersections as curve_intersections
 from ._knots import (
     approximation_knots as approximation_knots,
     averaged_knots as averaged_knots,

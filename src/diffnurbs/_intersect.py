@@ -1,0 +1,271 @@
+"""Every intersection of two curves: subdivision to find them all, Newton to polish them,
+and the implicit function theorem for their gradients.
+
+Robust first: both curves are cut into Bezier pieces, and pairs of pieces whose bounding
+boxes (which hold the pieces: the convex hull property, weights positive) do not overlap are
+dropped; the larger piece of every other pair is halved (de Casteljau at 1/2) until both are
+flat to `_FLAT` of their size. Each flat pair gives the crossing of its two chords as a start,
+Gauss-Newton on `C1(u) - C2(v)` polishes it on the Bezier pieces (in NumPy), and starts that
+converge to one point are merged. Tangential contacts converge more slowly but are found the
+same way (the distance goes to zero). Two flat pieces that lie on each other within `tol`
+are an overlap: reported as an interval, not as points.
+
+Exact last: the polished parameters go through one more Newton step in JAX, outside the
+search, whose derivative is the implicit-function one: `jax.grad` reaches the control points,
+weights and knots of both curves.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ._knotops import bezier_pieces
+from ._validate import concrete
+
+_FLAT = 1e-4
+"""A piece is flat when its control points are within this fraction of its size of its chord."""
+
+_MAX_DEPTH = 60
+_NEWTON_STEPS = 60
+
+
+def _halves(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """De Casteljau at 1/2 on homogeneous control points (the two halves)."""
+    left, right, level = [h[0]], [h[-1]], h
+    while len(level) > 1:
+        level = 0.5 * (level[:-1] + level[1:])
+        left.append(level[0])
+        right.append(level[-1])
+    return np.array(left), np.array(right[::-1])
+
+
+def _points(h: np.ndarray, rational: bool) -> np.ndarray:
+    return h[:, :-1] / h[:, -1:] if rational else h
+
+
+def _bezier(h: np.ndarray, t: float, rational: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Point and first derivative of a Bezier piece (homogeneous points `h`) at `t`."""
+    n, levels = len(h) - 1, h
+    for _ in range(n - 1):
+        levels = (1 - t) * levels[:-1] + t * levels[1:]
+    point = (1 - t) * levels[0] + t * levels[1] if n >= 1 else levels[0]
+    slope = n * (levels[1] - levels[0]) if n >= 1 else np.zeros_like(levels[0])
+    if not rational:
+        return point, slope
+    return point[:-1] / point[-1], (slope[:-1] * point[-1] - point[:-1] * slope[-1]) / point[
+        -1
+    ] ** 2
+
+
+class _Piece:
+    """A Bezier piece of a curve: homogeneous control points on the parameters `[a, b]`."""
+
+    def __init__(self, h, a, b, rational):
+        self.h, self.a, self.b, self.rational = h, a, b, rational
+        points = _points(h, rational)
+        self.low, self.high = points.min(axis=0), points.max(axis=0)
+        self.size = float(np.linalg.norm(self.high - self.low))
+        chord = points[-1] - points[0]
+        length = np.linalg.norm(chord)
+        if length > 0:
+            offsets = points - points[0]
+            along = offsets @ chord / length**2
+            deviation = np.linalg.norm(offsets - np.outer(along, chord), axis=1).max()
+        else:
+            deviation = np.linalg.norm(points - points[0], axis=1).max()
+        self.deviation = float(deviation)
+        self.ends = points[0], points[-1]
+
+    def halves(self):
+        left, right = _halves(self.h)
+        middle = 0.5 * (self.a + self.b)
+        return _Piece(left, self.a, middle, self.rational), _Piece(
+            right, middle, self.b, self.rational
+        )
+
+
+def _pieces(curve) -> list[_Piece]:
+    knots = concrete(curve.knots)
+    points = concrete(curve.homogeneous_points())
+    if knots is None or points is None:
+        raise ValueError(
+            "curve_intersections needs concrete curves to search; to differentiate, find the "
+            "intersections first and pass them as `start=(u1, u2)` inside the function"
+        )
+    return [
+        _Piece(np.asarray(h), float(k[0]), float(k[-1]), curve.rational)
+        for h, k in bezier_pieces(points, knots, curve.degree)
+    ]
+
+
+def _chord_crossing(p: _Piece, q: _Piece) -> tuple[float, float]:
+    """Parameters in `[0, 1]` of the nearest points of the two pieces' chords."""
+    (p0, p1), (q0, q1) = p.ends, q.ends
+    matrix = np.stack([p1 - p0, q0 - q1], axis=1)
+    s, t = np.linalg.lstsq(matrix, q0 - p0, rcond=None)[0]
+    return float(np.clip(s, 0, 1)), float(np.clip(t, 0, 1))
+
+
+def _distance_to(point: np.ndarray, q: _Piece) -> float:
+    """Distance from a point to a Bezier piece (Gauss-Newton projection from the chord)."""
+    a, b = q.ends
+    d = b - a
+    t = float(np.clip((point - a) @ d / max(d @ d, 1e-300), 0, 1))
+    for _ in range(_NEWTON_STEPS):
+        x, dx = _bezier(q.h, t, q.rational)
+        t_new = float(np.clip(t + (point - x) @ dx / max(dx @ dx, 1e-300), 0, 1))
+        if abs(t_new - t) < 1e-16:
+            break
+        t = t_new
+    return float(np.linalg.norm(point - _bezier(q.h, t, q.rational)[0]))
+
+
+def _overlap(p: _Piece, q: _Piece, tol: float) -> bool:
+    """Whether two flat pieces run on each other: the middle of one lies on the other
+    within `tol`, and so does an end of one of them (a crossing puts neither there, as the
+    pieces are flat)."""
+    if min(p.size, q.size) <= 4 * tol:
+        return False
+    middles = [(_bezier(p.h, 0.5, p.rational)[0], q), (_bezier(q.h, 0.5, q.rational)[0], p)]
+    if all(_distance_to(x, other) > tol for x, other in middles):
+        return False
+    ends = [(x, q) for x in p.ends] + [(x, p) for x in q.ends]
+    return any(_distance_to(x, other) <= tol for x, other in ends)
+
+
+def _polish(p: _Piece, q: _Piece, s: float, t: float) -> tuple[float, float, float]:
+    """Gauss-Newton on the two Bezier pieces from `(s, t)`; returns `(s, t, distance)`."""
+    for _ in range(_NEWTON_STEPS):
+        (x, dx), (y, dy) = _bezier(p.h, s, p.rational), _bezier(q.h, t, q.rational)
+        step = np.linalg.lstsq(np.stack([dx, -dy], axis=1), y - x, rcond=None)[0]
+        s_new, t_new = float(np.clip(s + step[0], 0, 1)), float(np.clip(t + step[1], 0, 1))
+        if abs(s_new - s) + abs(t_new - t) < 1e-16:
+            break
+        s, t = s_new, t_new
+    gap = _bezier(p.h, s, p.rational)[0] - _bezier(q.h, t, q.rational)[0]
+    return s, t, float(np.linalg.norm(gap))
+
+
+def search(c1, c2, tol: float):
+    """`(u1, u2, overlaps)`: the intersection parameters (NumPy, sorted by `u1`) and the
+    overlapping intervals `[((u_start, u_end), (v_start, v_end)), ...]`."""
+    tops1, tops2 = _pieces(c1), _pieces(c2)
+    found, overlaps = [], []
+    stack = [(p, q, i, j, 0) for i, p in enumerate(tops1) for j, q in enumerate(tops2)]
+    while stack:
+        p, q, i, j, depth = stack.pop()
+        if np.any(p.low > q.high + tol) or np.any(q.low > p.high + tol):
+            continue
+        flat = p.deviation <= _FLAT * max(p.size, tol) and q.deviation <= _FLAT * max(q.size, tol)
+        if flat or depth >= _MAX_DEPTH:
+            if _overlap(p, q, tol):
+                overlaps.append(((p.a, p.b), (q.a, q.b)))
+                continue
+            s, t = _chord_crossing(p, q)
+            top_p, top_q = tops1[i], tops2[j]
+            s = (p.a + s * (p.b - p.a) - top_p.a) / (top_p.b - top_p.a)
+            t = (q.a + t * (q.b - q.a) - top_q.a) / (top_q.b - top_q.a)
+            s, t, gap = _polish(top_p, top_q, s, t)
+            if gap <= tol:
+                found.append((top_p.a + s * (top_p.b - top_p.a), top_q.a + t * (top_q.b - top_q.a)))
+            continue
+        if p.size >= q.size:
+            stack += [(half, q, i, j, depth + 1) for half in p.halves()]
+        else:
+            stack += [(p, half, i, j, depth + 1) for half in q.halves()]
+    return _merged(found, overlaps, c1, c2, tol)
+
+
+def _merged(found, overlaps, c1, c2, tol):
+    """Starts that reached one point counted once; points inside an overlap dropped; the
+    overlap intervals joined where they touch."""
+    overlaps = _join(sorted(overlaps))
+    points, result = [], []
+    for u, v in sorted(found):
+        # A point at (or just beyond) the end of an overlap is where the curves start to run
+        # together: it extends the overlap (whose end pieces were not flat enough to count).
+        near = [
+            k
+            for k, ((a, b), _) in enumerate(overlaps)
+            if a - 0.01 * (b - a) <= u <= b + 0.01 * (b - a)
+        ]
+        if near:
+            (a, b), (c, d) = overlaps[near[0]]
+            overlaps[near[0]] = ((min(a, u), max(b, u)), (min(c, v), max(d, v)))
+            continue
+        x = np.asarray(c1(u))
+        if any(np.linalg.norm(x - y) <= max(tol, 1e-9) for y in points):
+            continue
+        points.append(x)
+        result.append((u, v))
+    u1 = np.array([u for u, _ in result])
+    u2 = np.array([v for _, v in result])
+    return u1, u2, overlaps
+
+
+def _join(intervals):
+    joined = []
+    for (a, b), (c, d) in intervals:
+        if joined and a <= joined[-1][0][1] + 1e-12:
+            (a0, _), (c0, d0) = joined[-1]
+            joined[-1] = ((a0, b), (min(c0, c), max(d0, d)))
+        else:
+            joined.append(((a, b), (c, d)))
+    return joined
+
+
+def polish(c1, c2, u1, u2):
+    """One Newton step at the intersections `(u1, u2)`, whose derivative is the implicit-
+    function one (the values move only by rounding at a true intersection)."""
+    fixed = jax.lax.stop_gradient((u1, u2))
+    d1, d2 = c1.derivatives(fixed[0], 1), c2.derivatives(fixed[1], 1)
+    gap = d1[:, 0] - d2[:, 0]
+    jacobian = jnp.stack([d1[:, 1], -d2[:, 1]], axis=-1)  # (count, dim, 2)
+    step = jnp.linalg.pinv(jacobian) @ gap[..., None]
+    return fixed[0] - step[:, 0, 0], fixed[1] - step[:, 1, 0]
+
+
+def curve_intersections(c1, c2, tol: float | None = None, *, start=None, full_output=False):
+    """Every intersection of two curves (2D or 3D), tangential contacts included.
+
+    **Arguments:**
+
+    - `c1`, `c2`: `NURBSCurve`s of one dimension.
+    - `tol`: how close two points must be to count as an intersection; None:
+      `1e-9 (1 + size)`, the size the larger diagonal of the curves' bounding boxes.
+    - `start`: `(u1, u2)` found before: the search is skipped and only the last Newton step
+      is taken, so the call can sit inside a function that `jax.grad` differentiates
+      (the search needs concrete curves).
+    - `full_output`: also return the overlaps.
+
+    **Returns:**
+
+    `(u1, u2)`: arrays of the parameters on `c1` and `c2`, sorted along `c1`; with
+    `full_output`, `(u1, u2, overlaps)`, `overlaps` a list of
+    `((u1_start, u1_end), (u2_start, u2_end))` where the curves run on each other (no
+    points are reported inside them). No intersection: empty arrays.
+    """
+    from ._curve import NURBSCurve
+
+    for name, curve in (("c1", c1), ("c2", c2)):
+        if not isinstance(curve, NURBSCurve):
+            raise ValueError(f"{name} must be a NURBSCurve, got {type(curve).__name__}")
+    if c1.dim != c2.dim:
+        raise ValueError(f"the curves must have one dimension, got {c1.dim} and {c2.dim}")
+    overlaps = []
+    if start is None:
+        if tol is None:
+            sizes = [p.size for c in (c1, c2) for p in _pieces(c)]
+            tol = 1e-9 * (1 + max(sizes))
+        elif not np.isfinite(tol) or tol <= 0:
+            raise ValueError(f"tol must be a positive number, got {tol!r}")
+        u1, u2, overlaps = search(c1, c2, float(tol))
+    else:
+        u1, u2 = start
+    u1 = jnp.asarray(u1, dtype=c1.knots.dtype).reshape(-1)
+    u2 = jnp.asarray(u2, dtype=c2.knots.dtype).reshape(-1)
+    if u1.shape != u2.shape:
+        raise ValueError(f"start must be two arrays of one length, got {u1.shape}, {u2.shape}")
+    if u1.size:
+        u1, u2 = polish(c1, c2, u1, u2)
+    return (u1, u2, overlaps) if full_output else (u1, u2)

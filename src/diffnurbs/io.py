@@ -1,11 +1,14 @@
-"""Bezier patch files (`.bpt`): a patch count, then per patch its degrees `p q` and the
-`(p + 1)(q + 1)` control points `x y z`, row by row (the format of the Utah teapot file)."""
+"""Files: Bezier patch files (`.bpt`: a patch count, then per patch its degrees `p q` and
+the `(p + 1)(q + 1)` control points `x y z`, row by row, the format of the Utah teapot file),
+meshes (`tessellate`, `export_mesh`), and CAD exchange (`write_cad`, `read_cad`: STEP and
+`.3dm`, see `_cad`)."""
 
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from ._cad import read_cad as read_cad, write_cad as write_cad
 from ._halfedge import merge_labels
 from ._sampling import even_grid, import_pyvista
 from ._surface import AbstractSurface, NURBSSurface

@@ -178,6 +178,68 @@ def equal_arc_case(rng: np.random.Generator) -> Case:
     )
 
 
+def intersections_case(rng: np.random.Generator) -> Case:
+    """All intersections of two random planar cubics with 50 control points each (no peer
+    intersects NURBS curves: OpenCascade would, through optional bindings not timed here)."""
+    a = dn.NURBSCurve(rng.normal(size=(50, 2)), 3)
+    b = dn.NURBSCurve(rng.normal(size=(50, 2)), 3)
+    u1, u2 = dn.curve_intersections(a, b)
+    residual = float(np.abs(np.asarray(a(u1)) - np.asarray(b(u2))).max())
+
+    def intersect():
+        return np.asarray(dn.curve_intersections(a, b)[0])
+
+    return Case(
+        f"20. all intersections of two planar cubics, 50 control points each: {len(u1)} "
+        f"points, largest |C1 - C2| = {residual:.1e} (intersections/s)",
+        {
+            "diffnurbs": Impl(intersect, len(u1), np.asarray(u1)),
+            "scipy": "no curve intersections",
+            "splipy": "no curve intersections",
+            "geomdl": "no curve intersections",
+        },
+        {},
+    )
+
+
+def simplify_case(rng: np.random.Generator) -> Case:
+    """Knot removal: a cubic with 1,000 inserted knots simplified back (knots removed per
+    second); geomdl's remove_knot, one knot at a time, on the first 100."""
+    curve = _profile(rng, n=20)
+    values = np.sort(rng.uniform(0.0, 1.0, REFINE_KNOTS))
+    refined = curve.refine(values)
+    reference = np.asarray(refined.simplify(1e-9).control_points)
+
+    def geomdl_remove():
+        from geomdl import BSpline, operations
+
+        spline = BSpline.Curve()
+        spline.degree = refined.degree
+        spline.ctrlpts = np.asarray(refined.control_points).tolist()
+        spline.knotvector = np.asarray(refined.knots).tolist()
+        for u in values[:GEOMDL_KNOTS]:
+            operations.remove_knot(spline, [u], [1])
+        return np.asarray(spline.ctrlpts)
+
+    # The same 100 knots removed one at a time by diffnurbs: what geomdl should return.
+    partial = refined
+    for u in values[:GEOMDL_KNOTS]:
+        partial = partial.remove_knot(float(u))[0]
+    return Case(
+        f"21. simplify: {REFINE_KNOTS:,} inserted knots removed from a cubic with 20 control "
+        "points (knots/s)",
+        {
+            "diffnurbs": Impl(
+                lambda: np.asarray(refined.simplify(1e-9).control_points), REFINE_KNOTS, reference
+            ),
+            "scipy": "no knot removal",
+            "splipy": "no knot removal",
+            "geomdl": Impl(geomdl_remove, GEOMDL_KNOTS, np.asarray(partial.control_points)),
+        },
+        {},
+    )
+
+
 def cases(rng: np.random.Generator) -> list[Case]:
     return [
         revolve_case(rng),
@@ -185,4 +247,6 @@ def cases(rng: np.random.Generator) -> list[Case]:
         kinematic_sweep_case(rng),
         refinement_case(rng),
         equal_arc_case(rng),
+        intersections_case(rng),
+        simplify_case(rng),
     ]

@@ -129,14 +129,17 @@ def test_installed_grader_scores_the_demo(installed, tmp_path):
     shutil.copyfile(DEMO_MASTER, submissions / "master" / DEMO_MASTER.name)
     shutil.copyfile(DEMO_EXERCISE, submissions / "blank" / DEMO_EXERCISE.name)
     args = ["submissions", "-o", "scores.csv", "--solutions", str(DEMO_MASTER.parent)]
+    args += ["--report", "report.json"]
     result = installed.run("diffnurbs-grade", *args, "--jobs", "2", cwd=tmp_path)
     assert result.returncode == 0, f"{result.stdout}\n{result.stderr}"
     with open(tmp_path / "scores.csv", newline="") as f:
         rows = {row.pop("file"): row for row in csv.DictReader(f)}
+    # On a failure, what the grader printed and its per-test report say why.
+    why = f"{result.stdout}\n{result.stderr}\n{(tmp_path / 'report.json').read_text()[:4000]}"
     assert rows == {
         "master/99_demo.ipynb": {"q1": "2", "q2": "3", "total": "5", "max": "5"},
         "blank/99_demo.ipynb": {"q1": "0", "q2": "0", "total": "0", "max": "5"},
-    }
+    }, why
 
 
 def test_installed_grader_without_solutions_says_what_it_looked_for(installed, tmp_path):

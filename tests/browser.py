@@ -131,6 +131,13 @@ def run_all(page, code_cells: int) -> None:
     """Run every cell of the open notebook, as Run > Run All Cells does, and wait until each
     of its `code_cells` code cells has run (or one raised)."""
     wait_for_idle_kernel(page)
+    # The kernel may be idle before JupyterLab has laid out every cell: wait for all of them.
+    with contextlib.suppress(PlaywrightTimeout):  # a shortfall is reported below, counted
+        page.wait_for_function(
+            "count => document.querySelectorAll('.jp-Notebook .jp-CodeCell').length >= count",
+            arg=code_cells,
+            timeout=60_000,
+        )
     shown = page.locator(".jp-Notebook .jp-CodeCell").count()
     assert shown == code_cells, f"{shown} of {code_cells} code cells are in the page (windowing?)"
     # A cell whose code is folded (the chapters' checks) shows no prompt, so its execution

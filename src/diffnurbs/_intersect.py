@@ -19,6 +19,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._curve import NURBSCurve
 from ._knotops import bezier_pieces
 from ._validate import concrete
 
@@ -245,8 +246,6 @@ def curve_intersections(c1, c2, tol: float | None = None, *, start=None, full_ou
     `((u1_start, u1_end), (u2_start, u2_end))` where the curves run on each other (no
     points are reported inside them). No intersection: empty arrays.
     """
-    from ._curve import NURBSCurve
-
     for name, curve in (("c1", c1), ("c2", c2)):
         if not isinstance(curve, NURBSCurve):
             raise ValueError(f"{name} must be a NURBSCurve, got {type(curve).__name__}")

@@ -191,7 +191,7 @@ def intersections_case(rng: np.random.Generator) -> Case:
 
     return Case(
         f"20. all intersections of two planar cubics, 50 control points each: {len(u1)} "
-        f"points, largest |C1 - C2| = {residual:.1e} (intersections/s)",
+        f"points, largest distance between C1(u1) and C2(u2) {residual:.1e} (intersections/s)",
         {
             "diffnurbs": Impl(intersect, len(u1), np.asarray(u1)),
             "scipy": "no curve intersections",

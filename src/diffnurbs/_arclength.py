@@ -13,14 +13,12 @@ implicit-function gradient `du/ds = 1 / |C'(u)|` and the gradient with respect t
 curve's control points, weights and knots.
 """
 
-import math
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from ._basis import combine_local, ders_basis_funs
+from ._basis import taylor_coefficients
 from ._misc import safe_divide, safe_norm
 from ._quadrature import gauss_legendre, panel_integrals, refined_panels
 from ._validate import concrete
@@ -68,9 +66,7 @@ def _local_speed(curve, start):
     """The speed near each `start`, `speed(t)` at `start + t`, from the Taylor coefficients of
     the (homogeneous) curve at `start`; `t` has shape `start.shape + extra`."""
     p = curve.degree
-    span, ders = ders_basis_funs(curve.knots, p, start, p)
-    factorials = jnp.asarray([math.factorial(k) for k in range(p + 1)], dtype=start.dtype)
-    taylor = combine_local(ders, curve.homogeneous_points(), span, p) / factorials[:, None]
+    taylor = taylor_coefficients(curve.knots, p, curve.homogeneous_points(), start)
 
     def speed(t):
         coefficient = taylor.reshape(start.shape + (1,) * (t.ndim - start.ndim) + taylor.shape[-2:])

@@ -145,6 +145,18 @@ def combine_local(funs: Array, points: Array, span: Array, degree: int) -> Array
     return total
 
 
+def taylor_coefficients(knots: Array, degree: int, points: Array, at: Array) -> Array:
+    """`C^(k)(at) / k!` for `k = 0..degree`: the coefficients of the curve's polynomial on the
+    span of `at`, around `at` (`C(at + t) = sum_k coefficient_k t^k` on that span).
+
+    `points` are the control points (homogeneous for a rational curve); the result has shape
+    `at.shape + (degree + 1, dim)`.
+    """
+    span, ders = ders_basis_funs(knots, degree, at, degree)
+    factorials = jnp.asarray([math.factorial(k) for k in range(degree + 1)], dtype=at.dtype)
+    return combine_local(ders, points, span, degree) / factorials[:, None]
+
+
 def basis_matrix(knots: ArrayLike, degree: int, u: ArrayLike) -> Float[Array, "m n+1"]:
     """The collocation matrix `A[k, i] = N_{i,p}(u_k)` of all basis functions.
 

@@ -1,6 +1,5 @@
 """NURBS curves: evaluation, derivatives and differential geometry."""
 
-import math
 import typing
 
 import equinox as eqx
@@ -9,7 +8,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._arclength import check_lengths, length_table, parameter_at_length, unit_speed_curve
-from ._basis import basis_funs, combine_local, ders_basis_funs, find_span
+from ._basis import basis_funs, combine_local, ders_basis_funs, find_span, taylor_coefficients
 from ._inversion import curve_closest_point
 from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
 from ._knotremoval import check_tolerance, homogeneous_tolerance, reduce, remove, simplify
@@ -253,10 +252,7 @@ class NURBSCurve(AbstractRationalSpline):
         """
         p = self.degree
         starts = self.knots[p : -p - 1]
-        span_of_start, ders = ders_basis_funs(self.knots, p, starts, p)
-        factorials = jnp.asarray([math.factorial(k) for k in range(p + 1)], dtype=u.dtype)
-        table = combine_local(ders, self.homogeneous_points(), span_of_start, p)
-        table = table / factorials[:, None]
+        table = taylor_coefficients(self.knots, p, self.homogeneous_points(), starts)
         span = find_span(self.knots, p, u)
         row, t = span - p, u - self.knots[span]
         columns = []

@@ -18,7 +18,8 @@ from scipy.interpolate import BSpline, NdBSpline
 
 import diffnurbs as dn
 
-LIBRARIES = ("diffnurbs", "scipy", "splipy", "geomdl")
+LIBRARIES = ("diffnurbs", "scipy", "splipy", "geomdl", "OpenCascade")
+"""OpenCascade (through `cadquery-ocp`) is timed only where it does the same job."""
 
 
 @dataclass

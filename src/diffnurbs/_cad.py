@@ -107,19 +107,21 @@ def _array1(kind, values):
     return array
 
 
-def _to_occ(shape, occ):
+def occ_geometry(shape, occ=None):
+    """`shape` as OpenCascade's `Geom_BSplineCurve` or `Geom_BSplineSurface` (poles,
+    weights, knots with multiplicities: nothing approximated). `occ`: `_ocp()`'s modules."""
+    occ = occ or _ocp()
     c, gp, geom = occ.collections, occ.gp, occ.Geom
     points, weights = _parts(shape)
     if isinstance(shape, NURBSCurve):
         values, counts = np.unique(np.asarray(shape.knots), return_counts=True)
-        curve = geom.Geom_BSplineCurve(
+        return geom.Geom_BSplineCurve(
             _array1(c.Array1_gp_Pnt, [gp.gp_Pnt(*map(float, p)) for p in points]),
             _array1(c.Array1_double, [float(w) for w in weights]),
             _array1(c.Array1_double, [float(v) for v in values]),
             _array1(c.Array1_int, [int(k) for k in counts]),
             shape.degree, False,
         )  # fmt: skip
-        return occ.BRepBuilderAPI.BRepBuilderAPI_MakeEdge(curve).Edge()
     nu, nv = points.shape[:2]
     poles, weight_grid = c.Array2_gp_Pnt(1, nu, 1, nv), c.Array2_double(1, nu, 1, nv)
     for i in range(nu):
@@ -127,7 +129,7 @@ def _to_occ(shape, occ):
             poles.SetValue(i + 1, j + 1, gp.gp_Pnt(*map(float, points[i, j])))
             weight_grid.SetValue(i + 1, j + 1, float(weights[i, j]))
     (vu, ku), (vv, kv) = (np.unique(np.asarray(k), return_counts=True) for k in shape.knots)
-    surface = geom.Geom_BSplineSurface(
+    return geom.Geom_BSplineSurface(
         poles, weight_grid,
         _array1(c.Array1_double, [float(v) for v in vu]),
         _array1(c.Array1_double, [float(v) for v in vv]),
@@ -135,7 +137,14 @@ def _to_occ(shape, occ):
         _array1(c.Array1_int, [int(k) for k in kv]),
         shape.degree[0], shape.degree[1], False, False,
     )  # fmt: skip
-    return occ.BRepBuilderAPI.BRepBuilderAPI_MakeFace(surface, 1e-7).Face()
+
+
+def _to_occ(shape, occ):
+    """`shape` as an OpenCascade edge or face (what a STEP file holds)."""
+    geometry = occ_geometry(shape, occ)
+    if isinstance(shape, NURBSCurve):
+        return occ.BRepBuilderAPI.BRepBuilderAPI_MakeEdge(geometry).Edge()
+    return occ.BRepBuilderAPI.BRepBuilderAPI_MakeFace(geometry, 1e-7).Face()
 
 
 def _write_step(path, shapes):

@@ -30,6 +30,7 @@ class Impl:
     points: int  # points evaluated by one call
     reference: np.ndarray  # diffnurbs's result for the same parameters
     convert: Callable[[object], np.ndarray] = np.asarray  # result -> reference layout
+    wrong: str = ""  # why the library's result is known to be wrong (shown, not compared)
 
 
 @dataclass

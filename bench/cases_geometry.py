@@ -16,7 +16,7 @@ import splipy
 import splipy.surface_factory
 from cases import Case, Impl
 from geomdl import helpers
-from OCP import Geom2dAPI, GeomAPI, gp
+from OCP import GCPnts, Geom2dAPI, GeomAdaptor, GeomAPI, gp
 from scipy import integrate, interpolate, optimize
 
 import diffnurbs as dn
@@ -29,6 +29,7 @@ REFINE_KNOTS = 1000
 GEOMDL_KNOTS = 100  # pure Python: the first knots only
 EQUAL_ARC = 10**6
 SCIPY_ARC = 200  # quad inside brentq per parameter: the first ones only
+OCC_ARC = 10**5  # OpenCascade: all of a smaller count (its parameters are read one by one)
 
 
 def _ready(x):
@@ -168,13 +169,22 @@ def equal_arc_case(rng: np.random.Generator) -> Case:
         return [optimize.brentq(lambda u, s=s: length(u) - s, 0.0, 1.0, xtol=1e-14)
                 if s > 0 else 0.0 for s in targets]  # fmt: skip
 
+    occ_curve = GeomAdaptor.GeomAdaptor_Curve(occ_geometry(curve))
+    occ_reference = np.asarray(jax.jit(lambda c: c.equal_arc_parameters(OCC_ARC))(curve))
+
+    def occ_equal():
+        found = GCPnts.GCPnts_UniformAbscissa(occ_curve, OCC_ARC, 1e-12)
+        return np.array([found.Parameter(i) for i in range(1, found.NbPoints() + 1)])
+
     return Case(
-        f"19. {EQUAL_ARC:,} parameters at equal arc length, cubic with 100 control points",
+        f"19. {EQUAL_ARC:,} parameters at equal arc length, cubic with 100 control points "
+        f"(OpenCascade's GCPnts_UniformAbscissa: {OCC_ARC:,} on the same curve)",
         {
             "diffnurbs": Impl(lambda: _ready(equal(curve)), EQUAL_ARC, reference),
             "scipy": Impl(scipy_equal, SCIPY_ARC, reference[:SCIPY_ARC]),
             "splipy": "no inverse arc length",
             "geomdl": "no inverse arc length",
+            "OpenCascade": Impl(occ_equal, OCC_ARC, occ_reference),
         },
         {"scipy": 1},
     )
@@ -239,7 +249,7 @@ def simplify_case(rng: np.random.Generator) -> Case:
     refined = curve.refine(values)
     reference = np.asarray(refined.simplify(1e-9).control_points)
 
-    def geomdl_remove():
+    def geomdl_spline():
         from geomdl import BSpline, operations
 
         spline = BSpline.Curve()
@@ -248,12 +258,35 @@ def simplify_case(rng: np.random.Generator) -> Case:
         spline.knotvector = np.asarray(refined.knots).tolist()
         for u in values[:GEOMDL_KNOTS]:
             operations.remove_knot(spline, [u], [1])
-        return np.asarray(spline.ctrlpts)
+        return spline
 
     # The same 100 knots removed one at a time by diffnurbs: what geomdl should return.
     partial = refined
     for u in values[:GEOMDL_KNOTS]:
         partial = partial.remove_knot(float(u))[0]
+
+    # Removing inserted knots must leave the curve as it was: geomdl's result is checked
+    # against the original curve (its remove_knot has open bugs, geomdl #135 and #136).
+    spline = geomdl_spline()
+    knots, p = np.asarray(spline.knotvector), refined.degree
+    if (knots[p], knots[-p - 1]) != (0.0, 1.0):
+        geomdl_wrong = f"its domain is [{knots[p]:.3g}, {knots[-p - 1]:.3g}], not [0, 1]"
+    else:
+        u = np.linspace(0.0, 1.0, 2001)
+        geomdl_curve = dn.NURBSCurve(np.asarray(spline.ctrlpts), p, knots)
+        off = float(np.abs(np.asarray(geomdl_curve(u)) - np.asarray(curve(u))).max())
+        geomdl_wrong = f"its curve is {off:.2g} away from the original" if off > 1e-9 else ""
+
+    def occ_remove():
+        # Geom_BSplineCurve.RemoveKnot(index, multiplicity left, tolerance), in place.
+        spline = occ_geometry(refined)
+        for u in values:
+            index = next(i for i in range(1, spline.NbKnots() + 1) if spline.Knot(i) == u)
+            spline.RemoveKnot(index, 0, 1e-9)
+        poles = spline.Poles()
+        return np.array([[poles.Value(i).Coord(k) for k in (1, 2, 3)]
+                         for i in range(1, poles.Length() + 1)])  # fmt: skip
+
     return Case(
         f"21. simplify: {REFINE_KNOTS:,} inserted knots removed from a cubic with 20 control "
         "points (knots/s)",
@@ -263,7 +296,13 @@ def simplify_case(rng: np.random.Generator) -> Case:
             ),
             "scipy": "no knot removal",
             "splipy": "no knot removal",
-            "geomdl": Impl(geomdl_remove, GEOMDL_KNOTS, np.asarray(partial.control_points)),
+            "geomdl": Impl(
+                lambda: np.asarray(geomdl_spline().ctrlpts),
+                GEOMDL_KNOTS,
+                np.asarray(partial.control_points),
+                wrong=geomdl_wrong,
+            ),
+            "OpenCascade": Impl(occ_remove, REFINE_KNOTS, reference),
         },
         {},
     )

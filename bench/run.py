@@ -82,6 +82,7 @@ def measure(case: Case) -> tuple[dict[str, tuple[float, float]], float]:
     worst = max(
         discrepancy(impl.convert(impl.call()), impl.reference, case.order_axis)
         for impl in impls.values()
+        if not impl.wrong
     )
     times = best_times({name: impl.call for name, impl in impls.items()}, BUDGET, warmup=False)
     rates = {
@@ -114,7 +115,8 @@ def table_row(case: Case, rates: dict[str, tuple[float, float]], worst: float):
             cells += [f"n/a: {impl}", ""]
         else:
             per_core = cpu["diffnurbs"] / cpu[library]
-            cells += [rate(wall[library]), f"{ratios[library]:.3g}× ({per_core:.3g}×)"]
+            wrong = f"; **wrong result**: {impl.wrong}" if impl.wrong else ""
+            cells += [rate(wall[library]), f"{ratios[library]:.3g}× ({per_core:.3g}×){wrong}"]
     targets, met = targets_cell(case, ratios)
     agree = "" if worst <= TOLERANCE else " ✗"
     cells += [targets, "yes" if met else "**no**", f"{worst:.1e}{agree}"]

@@ -86,6 +86,11 @@ from ._rational import (
 from ._shapes import arc as arc, circle as circle, ellipse as ellipse
 from ._skinning import gordon as gordon, loft as loft
 from ._surface import AbstractSurface as AbstractSurface, NURBSSurface as NURBSSurface
+from ._surface_intersect import (
+    IntersectionCurve as IntersectionCurve,
+    curve_surface_intersections as curve_surface_intersections,
+    surface_intersections as surface_intersections,
+)
 
 __version__ = "0.1.0"
 

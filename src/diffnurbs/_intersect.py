@@ -4,7 +4,7 @@ and the implicit function theorem for their gradients.
 Robust first: both curves are cut into Bezier pieces, and pairs of pieces whose bounding
 boxes (which hold the pieces: the convex hull property, weights positive) do not overlap are
 dropped; the larger piece of every other pair is halved (de Casteljau at 1/2) until both are
-flat to `_FLAT` of their size. Each flat pair gives the crossing of its two chords as a start,
+flat to `FLAT` of their size. Each flat pair gives the crossing of its two chords as a start,
 Gauss-Newton on `C1(u) - C2(v)` polishes it on the Bezier pieces (in NumPy), and starts that
 converge to one point are merged. Tangential contacts converge more slowly but are found the
 same way (the distance goes to zero). Two flat pieces that lie on each other within `tol`
@@ -23,14 +23,14 @@ from ._curve import NURBSCurve
 from ._knotops import bezier_pieces
 from ._validate import concrete
 
-_FLAT = 1e-4
+FLAT = 1e-4
 """A piece is flat when its control points are within this fraction of its size of its chord."""
 
-_MAX_DEPTH = 60
-_NEWTON_STEPS = 60
+MAX_DEPTH = 60
+NEWTON_STEPS = 60
 
 
-def _halves(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def halve(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """De Casteljau at 1/2 on homogeneous control points (the two halves)."""
     left, right, level = [h[0]], [h[-1]], h
     while len(level) > 1:
@@ -44,13 +44,21 @@ def _points(h: np.ndarray, rational: bool) -> np.ndarray:
     return h[:, :-1] / h[:, -1:] if rational else h
 
 
-def _bezier(h: np.ndarray, t: float, rational: bool) -> tuple[np.ndarray, np.ndarray]:
-    """Point and first derivative of a Bezier piece (homogeneous points `h`) at `t`."""
+def homogeneous_bezier(h: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+    """Point and first derivative at `t` of the polynomial Bezier piece whose control points
+    run along axis 0 of `h` (de Casteljau; trailing axes ride along, so a patch's net gives
+    the row of points and of `u`-derivatives at `t`)."""
     n, levels = len(h) - 1, h
     for _ in range(n - 1):
         levels = (1 - t) * levels[:-1] + t * levels[1:]
-    point = (1 - t) * levels[0] + t * levels[1] if n >= 1 else levels[0]
-    slope = n * (levels[1] - levels[0]) if n >= 1 else np.zeros_like(levels[0])
+    if n == 0:
+        return levels[0], np.zeros_like(levels[0])
+    return (1 - t) * levels[0] + t * levels[1], n * (levels[1] - levels[0])
+
+
+def bezier_point(h: np.ndarray, t: float, rational: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Point and first derivative of a Bezier piece (homogeneous points `h`) at `t`."""
+    point, slope = homogeneous_bezier(h, t)
     if not rational:
         return point, slope
     return point[:-1] / point[-1], (slope[:-1] * point[-1] - point[:-1] * slope[-1]) / point[
@@ -58,7 +66,7 @@ def _bezier(h: np.ndarray, t: float, rational: bool) -> tuple[np.ndarray, np.nda
     ] ** 2
 
 
-class _Piece:
+class Piece:
     """A Bezier piece of a curve: homogeneous control points on the parameters `[a, b]`."""
 
     def __init__(self, h, a, b, rational):
@@ -78,28 +86,28 @@ class _Piece:
         self.ends = points[0], points[-1]
 
     def halves(self):
-        left, right = _halves(self.h)
+        left, right = halve(self.h)
         middle = 0.5 * (self.a + self.b)
-        return _Piece(left, self.a, middle, self.rational), _Piece(
+        return Piece(left, self.a, middle, self.rational), Piece(
             right, middle, self.b, self.rational
         )
 
 
-def _pieces(curve) -> list[_Piece]:
+def pieces(curve) -> list[Piece]:
     knots = concrete(curve.knots)
     points = concrete(curve.homogeneous_points())
     if knots is None or points is None:
         raise ValueError(
-            "curve_intersections needs concrete curves to search; to differentiate, find the "
-            "intersections first and pass them as `start=(u1, u2)` inside the function"
+            "the intersection search needs concrete curves; to differentiate, find the "
+            "intersections first and pass them as `start=` inside the function"
         )
     return [
-        _Piece(np.asarray(h), float(k[0]), float(k[-1]), curve.rational)
+        Piece(np.asarray(h), float(k[0]), float(k[-1]), curve.rational)
         for h, k in bezier_pieces(points, knots, curve.degree)
     ]
 
 
-def _chord_crossing(p: _Piece, q: _Piece) -> tuple[float, float]:
+def _chord_crossing(p: Piece, q: Piece) -> tuple[float, float]:
     """Parameters in `[0, 1]` of the nearest points of the two pieces' chords."""
     (p0, p1), (q0, q1) = p.ends, q.ends
     matrix = np.stack([p1 - p0, q0 - q1], axis=1)
@@ -107,58 +115,61 @@ def _chord_crossing(p: _Piece, q: _Piece) -> tuple[float, float]:
     return float(np.clip(s, 0, 1)), float(np.clip(t, 0, 1))
 
 
-def _distance_to(point: np.ndarray, q: _Piece) -> float:
+def _distance_to(point: np.ndarray, q: Piece) -> float:
     """Distance from a point to a Bezier piece (Gauss-Newton projection from the chord)."""
     a, b = q.ends
     d = b - a
     t = float(np.clip((point - a) @ d / max(d @ d, 1e-300), 0, 1))
-    for _ in range(_NEWTON_STEPS):
-        x, dx = _bezier(q.h, t, q.rational)
+    for _ in range(NEWTON_STEPS):
+        x, dx = bezier_point(q.h, t, q.rational)
         t_new = float(np.clip(t + (point - x) @ dx / max(dx @ dx, 1e-300), 0, 1))
         if abs(t_new - t) < 1e-16:
             break
         t = t_new
-    return float(np.linalg.norm(point - _bezier(q.h, t, q.rational)[0]))
+    return float(np.linalg.norm(point - bezier_point(q.h, t, q.rational)[0]))
 
 
-def _overlap(p: _Piece, q: _Piece, tol: float) -> bool:
+def _overlap(p: Piece, q: Piece, tol: float) -> bool:
     """Whether two flat pieces run on each other: the middle of one lies on the other
     within `tol`, and so does an end of one of them (a crossing puts neither there, as the
     pieces are flat)."""
     if min(p.size, q.size) <= 4 * tol:
         return False
-    middles = [(_bezier(p.h, 0.5, p.rational)[0], q), (_bezier(q.h, 0.5, q.rational)[0], p)]
+    middles = [
+        (bezier_point(p.h, 0.5, p.rational)[0], q),
+        (bezier_point(q.h, 0.5, q.rational)[0], p),
+    ]
     if all(_distance_to(x, other) > tol for x, other in middles):
         return False
     ends = [(x, q) for x in p.ends] + [(x, p) for x in q.ends]
     return any(_distance_to(x, other) <= tol for x, other in ends)
 
 
-def _polish(p: _Piece, q: _Piece, s: float, t: float) -> tuple[float, float, float]:
+def _polish(p: Piece, q: Piece, s: float, t: float) -> tuple[float, float, float]:
     """Gauss-Newton on the two Bezier pieces from `(s, t)`; returns `(s, t, distance)`."""
-    for _ in range(_NEWTON_STEPS):
-        (x, dx), (y, dy) = _bezier(p.h, s, p.rational), _bezier(q.h, t, q.rational)
+    for _ in range(NEWTON_STEPS):
+        (x, dx), (y, dy) = bezier_point(p.h, s, p.rational), bezier_point(q.h, t, q.rational)
         step = np.linalg.lstsq(np.stack([dx, -dy], axis=1), y - x, rcond=None)[0]
         s_new, t_new = float(np.clip(s + step[0], 0, 1)), float(np.clip(t + step[1], 0, 1))
         if abs(s_new - s) + abs(t_new - t) < 1e-16:
             break
         s, t = s_new, t_new
-    gap = _bezier(p.h, s, p.rational)[0] - _bezier(q.h, t, q.rational)[0]
+    gap = bezier_point(p.h, s, p.rational)[0] - bezier_point(q.h, t, q.rational)[0]
     return s, t, float(np.linalg.norm(gap))
 
 
 def search(c1, c2, tol: float):
     """`(u1, u2, overlaps)`: the intersection parameters (NumPy, sorted by `u1`) and the
     overlapping intervals `[((u_start, u_end), (v_start, v_end)), ...]`."""
-    tops1, tops2 = _pieces(c1), _pieces(c2)
+    tops1, tops2 = pieces(c1), pieces(c2)
     found, overlaps = [], []
     stack = [(p, q, i, j, 0) for i, p in enumerate(tops1) for j, q in enumerate(tops2)]
     while stack:
         p, q, i, j, depth = stack.pop()
         if np.any(p.low > q.high + tol) or np.any(q.low > p.high + tol):
             continue
-        flat = p.deviation <= _FLAT * max(p.size, tol) and q.deviation <= _FLAT * max(q.size, tol)
-        if flat or depth >= _MAX_DEPTH:
+        flat = p.deviation <= FLAT * max(p.size, tol) and q.deviation <= FLAT * max(q.size, tol)
+        if flat or depth >= MAX_DEPTH:
             if _overlap(p, q, tol):
                 overlaps.append(((p.a, p.b), (q.a, q.b)))
                 continue
@@ -254,7 +265,7 @@ def curve_intersections(c1, c2, tol: float | None = None, *, start=None, full_ou
     overlaps = []
     if start is None:
         if tol is None:
-            sizes = [p.size for c in (c1, c2) for p in _pieces(c)]
+            sizes = [p.size for c in (c1, c2) for p in pieces(c)]
             tol = 1e-9 * (1 + max(sizes))
         elif not np.isfinite(tol) or tol <= 0:
             raise ValueError(f"tol must be a positive number, got {tol!r}")

@@ -40,6 +40,7 @@ class Case:
     targets: dict[str, float]  # library -> smallest acceptable diffnurbs / library ratio
     group: str = ""  # cases of one group are also compared with each other (flatness)
     order_axis: int | None = None  # axis of the derivative order, compared order by order
+    tolerance: float | None = None  # accepted difference, if not run.py's (approximations)
 
 
 def discrepancy(result: np.ndarray, reference: np.ndarray, order_axis: int | None) -> float:

@@ -4,7 +4,9 @@ tessellated to 10^6 points, a kinematic sweep on a 500 x 500 grid, knot refineme
 
 splipy revolves and refines too and geomdl refines, so those are timed side by side and
 their results compared with diffnurbs's; the tessellation (a pyvista mesh) and the
-kinematic sweep (rotation-minimising frame) exist in diffnurbs only.
+kinematic sweep (rotation-minimising frame) exist in diffnurbs only. OpenCascade (its
+Python bindings, `cadquery-ocp`) is timed on what it does too: equal-arc parameters, curve
+and surface intersections, knot removal.
 """
 
 import math
@@ -308,6 +310,61 @@ def simplify_case(rng: np.random.Generator) -> Case:
     )
 
 
+def _height_field(rng: np.random.Generator, n: int = 10) -> dn.NURBSSurface:
+    """A bicubic surface z = f(x, y) over the unit square, `n x n` random heights."""
+    x = np.linspace(0.0, 1.0, n)
+    grid = np.stack(np.meshgrid(x, x, indexing="ij"), axis=-1)
+    heights = rng.normal(scale=0.2, size=(n, n, 1))
+    return dn.NURBSSurface(np.concatenate([grid, heights], axis=-1), (3, 3))
+
+
+def _project(point: np.ndarray, curves) -> np.ndarray:
+    """The nearest point of OpenCascade curves to `point`."""
+    best, nearest = np.inf, None
+    for curve in curves:
+        projection = GeomAPI.GeomAPI_ProjectPointOnCurve(gp.gp_Pnt(*map(float, point)), curve)
+        if projection.NbPoints() and projection.LowerDistance() < best:
+            best, found = projection.LowerDistance(), projection.NearestPoint()
+            nearest = np.array([found.X(), found.Y(), found.Z()])
+    return nearest
+
+
+def surface_intersection_case(rng: np.random.Generator) -> Case:
+    """The intersection curves of two random bicubic height fields with 10 x 10 control
+    points. OpenCascade: `GeomAPI_IntSS`; its curves are compared with points of
+    diffnurbs's (the nearest point of OpenCascade's curves to each). Both fit the curves
+    within a tolerance, so they agree to about that, not to rounding."""
+    s1, s2 = _height_field(rng), _height_field(rng)
+    branches = dn.surface_intersections(s1, s2)
+    w = np.linspace(0.0, 1.0, 101)
+    points = np.concatenate([np.asarray(b.curve(w)) for b in branches])
+    occ_1, occ_2 = occ_geometry(s1), occ_geometry(s2)
+
+    def intersect():
+        return [b.curve for b in dn.surface_intersections(s1, s2)]
+
+    def occ_intersect():
+        found = GeomAPI.GeomAPI_IntSS(occ_1, occ_2, 1e-7)
+        return [found.Line(i) for i in range(1, found.NbLines() + 1)]
+
+    count = len(occ_intersect())
+    return Case(
+        f"22. intersection curves of two bicubic surfaces, 10 x 10 control points each: "
+        f"diffnurbs {len(branches)} branches, OpenCascade {count} curves (surface pairs/s)",
+        {
+            "diffnurbs": Impl(intersect, 1, points, lambda c: np.concatenate([x(w) for x in c])),
+            "scipy": "no surface intersections",
+            "splipy": "no surface intersections",
+            "geomdl": "no surface intersections",
+            "OpenCascade": Impl(
+                occ_intersect, 1, points, lambda c: np.array([_project(p, c) for p in points])
+            ),
+        },
+        {},
+        tolerance=1e-5,
+    )
+
+
 def cases(rng: np.random.Generator) -> list[Case]:
     return [
         revolve_case(rng),
@@ -317,4 +374,5 @@ def cases(rng: np.random.Generator) -> list[Case]:
         equal_arc_case(rng),
         intersections_case(rng),
         simplify_case(rng),
+        surface_intersection_case(rng),
     ]

@@ -75,6 +75,26 @@ def test_random_curves_against_a_dense_brute_force(seed):
         assert np.abs(found - hit).max(axis=1).min() < 2e-3, hit
 
 
+@pytest.mark.parametrize("shift", [0.0, 0.37])
+def test_a_tangential_contact_is_a_point_not_an_overlap(shift):
+    # y = (x - shift)^2 against y = 0 (the x axis, and a space version lifted to z = 1):
+    # the curves stay within tol over a stretch of about sqrt(tol), yet meet at one point.
+    bezier = np.array([[-1.0, 1.0], [0.0, -1.0], [1.0, 1.0]])
+    parabola = dn.NURBSCurve(bezier + np.array([shift, 0.0]), 2)
+    axis = dn.NURBSCurve(np.array([[-2.0, 0.0], [2.0, 0.0]]), 1)
+    for a, b in ((parabola, axis), (axis, parabola)):
+        u1, u2, overlaps = dn.curve_intersections(a, b, full_output=True)
+        assert overlaps == [] and u1.shape == (1,), (overlaps, u1)
+        np.testing.assert_allclose(a(u1), [[shift, 0.0]], atol=1e-7)  # a double root
+        np.testing.assert_allclose(b(u2), [[shift, 0.0]], atol=1e-7)
+    lift = np.array([0.0, 0.0, 1.0])
+    space = [dn.NURBSCurve(np.pad(c.control_points, [(0, 0), (0, 1)]) + lift, c.degree)
+             for c in (parabola, axis)]  # fmt: skip
+    u1, _, overlaps = dn.curve_intersections(*space, full_output=True)
+    assert overlaps == [] and u1.shape == (1,)
+    np.testing.assert_allclose(space[0](u1), [[shift, 0.0, 1.0]], atol=1e-7)
+
+
 def test_an_overlap_is_reported_as_an_interval():
     rng = np.random.default_rng(4)
     curve = dn.NURBSCurve(rng.normal(size=(4, 2)), 3)  # one Bezier piece

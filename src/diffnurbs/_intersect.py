@@ -188,10 +188,43 @@ def search(c1, c2, tol: float):
     return _merged(found, overlaps, c1, c2, tol)
 
 
+def _contacts(overlaps, c1, c2, tol):
+    """Split joined overlap intervals into true overlaps and tangential contacts.
+
+    Near a tangential contact the curves stay within `tol` of each other over a short
+    stretch (about `sqrt(tol / curvature)`), so its flat pieces pass the overlap test too.
+    On a true overlap the curves coincide: a quarter of the way in from either end their
+    distance is rounding. At a contact it grows with the square of the distance from the
+    contact and is about `tol / 4` there. Each contact becomes one point, polished by
+    Gauss-Newton from the middle of its stretch (linear convergence at a double root).
+    """
+    if not overlaps:
+        return [], []
+    ends = np.array([(a + (b - a) / 4, b - (b - a) / 4) for (a, b), _ in overlaps])
+    quarters = jnp.asarray(ends.ravel())
+    gaps = np.linalg.norm(
+        np.asarray(c1(quarters)) - np.asarray(c2(c2.closest_point(c1(quarters)))), axis=-1
+    ).reshape(ends.shape)
+    true, contacts = [], []
+    for interval, gap in zip(overlaps, gaps, strict=True):
+        if gap.max() <= tol / 100:
+            true.append(interval)
+            continue
+        (a, b), (c, d) = interval
+        u, v = jnp.asarray([(a + b) / 2]), jnp.asarray([(c + d) / 2])
+        for _ in range(NEWTON_STEPS):
+            u, v = polish(c1, c2, u, v)
+            u, v = (jnp.clip(x, *curve.domain) for x, curve in ((u, c1), (v, c2)))
+        if np.linalg.norm(np.asarray(c1(u)) - np.asarray(c2(v))) <= tol:
+            contacts.append((float(u[0]), float(v[0])))
+    return true, contacts
+
+
 def _merged(found, overlaps, c1, c2, tol):
     """Starts that reached one point counted once; points inside an overlap dropped; the
-    overlap intervals joined where they touch."""
-    overlaps = _join(sorted(overlaps))
+    overlap intervals joined where they touch; tangential contacts taken out of them."""
+    overlaps, contacts = _contacts(_join(sorted(overlaps)), c1, c2, tol)
+    found = found + contacts
     points, result = [], []
     for u, v in sorted(found):
         # A point at (or just beyond) the end of an overlap is where the curves start to run

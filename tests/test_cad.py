@@ -23,8 +23,10 @@ U = np.linspace(0.0, 1.0, 201)
 @pytest.mark.parametrize("suffix", [".step", ".stp", ".3dm"])
 def test_round_trip(tmp_path, suffix):
     path = tmp_path / f"shapes{suffix}"
-    dn.io.write_cad(path, [SPACE, PLANAR, dn.circle(1.0), SURFACE])  # STEP: curves first
-    space, planar, circle, surface = dn.io.read_cad(path)
+    # Closed shapes too: OpenCascade reads them as periodic, read_cad clamps them back.
+    closed = dn.revolve(SPACE, (0.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    dn.io.write_cad(path, [SPACE, PLANAR, dn.circle(1.0), SURFACE, closed])  # curves first
+    space, planar, circle, surface, revolved = dn.io.read_cad(path)
     # STEP writes 12 significant digits; openNURBS stores doubles.
     atol = 1e-12 * (1 + np.abs(SURFACE.control_points).max()) if "st" in suffix else 0.0
     assert space.degree == 3 and space.rational
@@ -36,6 +38,12 @@ def test_round_trip(tmp_path, suffix):
     assert surface.degree == (3, 2)
     np.testing.assert_allclose(surface(uu, vv), SURFACE(uu, vv), atol=atol)
     np.testing.assert_allclose(np.linalg.norm(circle(U)[:, :2], axis=1), 1.0, atol=atol + 1e-15)
+    np.testing.assert_allclose(circle.knots, dn.circle(1.0).knots, atol=atol)
+    np.testing.assert_allclose(circle.weights, dn.circle(1.0).weights, atol=atol)
+    for got, want in zip(revolved.knots, closed.knots, strict=True):
+        np.testing.assert_allclose(got, want, atol=atol)
+    np.testing.assert_allclose(revolved.weights, closed.weights, atol=atol)
+    np.testing.assert_allclose(revolved(uu, vv), closed(uu, vv), atol=atol)
 
 
 def test_the_other_libraries_read_the_same_points(tmp_path):

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ._curve import NURBSCurve
+from ._knotops import clamp
 from ._surface import NURBSSurface
 
 
@@ -67,10 +68,17 @@ def _shapes(shapes) -> list:
 
 
 def _from_parts(points, weights, knots, degree):
+    """A curve or surface with clamped knots: OpenCascade reads a closed one as periodic,
+    whose knots run past the domain ([-0.25, 0, 0, ..., 1, 1, 1.25] for a circle), and
+    clamping gives back the same curve on the knots it was written with."""
     weights = None if np.allclose(weights, 1.0, rtol=0, atol=0) else weights
     if isinstance(degree, tuple):
-        return NURBSSurface(points, degree, knots, weights)
-    return NURBSCurve(points, degree, knots, weights)
+        surface = NURBSSurface(points, degree, knots, weights)
+        for direction in ("u", "v"):
+            surface = surface._along(direction, clamp)
+        return surface
+    curve = NURBSCurve(points, degree, knots, weights)
+    return curve._from_homogeneous_points(*clamp(curve.homogeneous_points(), knots, degree))
 
 
 # STEP (OpenCascade)

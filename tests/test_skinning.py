@@ -44,6 +44,22 @@ def test_rational_sections_stay_exact():
     np.testing.assert_allclose(radius, 1 + points[..., 2] / 4, atol=1e-14)
 
 
+def test_rational_and_polynomial_sections_together():
+    # The polynomial section gets weights 1: all sections interpolated in homogeneous form.
+    circle = dn.circle(1.0)
+    lift = [
+        np.c_[np.asarray(circle.control_points) * r, np.full(9, z)] for r, z in ((1, 0), (1.5, 2))
+    ]
+    sections = [
+        dn.NURBSCurve(lift[0], 2, circle.knots, circle.weights),
+        dn.NURBSCurve(np.c_[np.random.default_rng(1).normal(size=(6, 2)), np.ones(6)], 3),
+        dn.NURBSCurve(lift[1], 2, circle.knots, circle.weights),
+    ]
+    surface, v = dn.loft(sections, degree_v=2, full_output=True)
+    for section, v_k in zip(sections, np.asarray(v), strict=True):
+        np.testing.assert_allclose(surface(U, v_k), section(U), atol=1e-14)
+
+
 def test_two_lines_give_the_bilinear_patch():
     bottom = dn.NURBSCurve(np.array([[0.0, 0, 0], [2, 0, 0]]), 1)
     top = dn.NURBSCurve(np.array([[0.0, 1, 1], [2, 1, -1]]), 1)

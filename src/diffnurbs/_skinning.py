@@ -35,8 +35,21 @@ def on_unit_domain(curve: NURBSCurve) -> NURBSCurve:
 
 def compatible(*curves: NURBSCurve) -> tuple[NURBSCurve, ...]:
     """The curves on [0, 1] with one degree and one knot vector (exact: elevation and
-    insertion), so their control points correspond one to one."""
+    insertion), so their control points correspond one to one; all rational (weights 1
+    added) if any is."""
     curves = tuple(on_unit_domain(c) for c in curves)
+    if any(c.rational for c in curves):
+        curves = tuple(
+            c
+            if c.rational
+            else NURBSCurve(
+                c.control_points,
+                c.degree,
+                c.knots,
+                jnp.ones(len(c.control_points), c.control_points.dtype),
+            )
+            for c in curves
+        )
     degree = max(c.degree for c in curves)
     curves = tuple(c if c.degree == degree else c.elevate_degree(degree - c.degree) for c in curves)
     target = merged_knots(*(np.asarray(c.knots) for c in curves))

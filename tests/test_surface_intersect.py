@@ -341,3 +341,76 @@ def test_bad_input_is_named():
         dn.surface_intersections(flat, SPHERE)
     with pytest.raises(ValueError, match="tol must be a positive"):
         dn.surface_intersections(SPHERE, SPHERE, tol=-1.0)
+
+
+def horizontal_plane(c):
+    """The bilinear patch `z = c` over [-2, 2]^2, `c` possibly traced."""
+    xy = jnp.array([[[-2.0, -2.0], [-2.0, 2.0]], [[2.0, -2.0], [2.0, 2.0]]])
+    return dn.NURBSSurface(jnp.concatenate([xy, jnp.full((2, 2, 1), c)], axis=-1), (1, 1))
+
+
+def test_gradient_of_the_circle_radius_cut_from_the_sphere():
+    """`z = c` cuts the unit sphere in a circle of radius `sqrt(1 - c^2)`; the radius of the
+    returned curve differentiates to `-c / sqrt(1 - c^2)` (through the plane's control
+    points, the search called inside `jax.grad`). The value computed under `jax.grad` is the
+    one computed without it."""
+    w = jnp.linspace(0.0, 1.0, 1001)
+
+    def radius(c):
+        (branch,) = dn.surface_intersections(horizontal_plane(c), SPHERE)
+        x = branch.curve(w)
+        return jnp.mean(jnp.hypot(x[:, 0], x[:, 1]))
+
+    c = 0.3
+    value, grad = jax.value_and_grad(radius)(c)
+    assert float(value) == float(radius(c))
+    assert abs(float(value) - math.sqrt(1 - c**2)) <= 1e-6
+    # Every data point's derivative is the exact one (implicit function theorem); the
+    # cubic through them carries them with its own interpolation error, relative ~1e-7
+    # here like that of the circle itself.
+    np.testing.assert_allclose(float(grad), -c / math.sqrt(1 - c**2), rtol=1e-6)
+
+
+def gauss_nodes(curve, count=4):
+    """Gauss-Legendre nodes and weights on each knot span of a curve (concrete knots)."""
+    breaks = np.unique(np.asarray(curve.knots))
+    x, a = np.polynomial.legendre.leggauss(count)
+    half = np.diff(breaks)[:, None] / 2
+    return (breaks[:-1, None] + half * (x + 1)).ravel(), (half * a).ravel()
+
+
+def test_gradient_through_crossing_cylinders_against_finite_differences():
+    """`jax.grad` of a scalar of both branches w.r.t. one control point of `s1`, against
+    central differences of the whole function (the search run again each time; the step
+    keeps the two loops). The scalar is an integral over arc length (the length and a first
+    moment), which does not depend on where along the branch the traced points fall (that
+    moves with the search; the Newton step holds it fixed). With `start=` the same
+    gradient comes out under `jit`."""
+    wide, narrow = cylinder(1.0, "z", 0.0), cylinder(0.6, "y", 0.3)
+    weights = jnp.array([0.3, -0.5, 0.8])
+    index = (2, 0)  # a point of the ring at z = -2, near y = 1 where the narrow one crosses
+
+    def moved(delta):
+        points = jnp.asarray(wide.control_points).at[index].add(delta)
+        return dn.NURBSSurface(points, wide.degree, wide.knots, wide.weights)
+
+    def scalar(delta, start=None, nodes=None):
+        branches = dn.surface_intersections(moved(delta), narrow, start=start)
+        assert len(branches) == 2
+        total = 0.0
+        for k, branch in enumerate(branches):
+            at, quadrature = gauss_nodes(branch.curve) if nodes is None else nodes[k]
+            d = branch.curve.derivatives(at, 1)
+            speed = jnp.linalg.norm(d[:, 1], axis=-1)
+            total += jnp.sum(quadrature * speed * (1.0 + d[:, 0] @ weights))
+        return total, branches
+
+    zero = jnp.zeros(3)
+    grad, start = jax.grad(scalar, has_aux=True)(zero)  # the search inside jax.grad
+    direction = np.array([0.6, -0.3, 0.74])
+    step = 1e-4
+    central = (scalar(step * direction)[0] - scalar(-step * direction)[0]) / (2 * step)
+    np.testing.assert_allclose(float(grad @ direction), float(central), rtol=1e-5, atol=1e-7)
+    nodes = [gauss_nodes(b.curve) for b in start]
+    again = jax.jit(jax.grad(lambda d: scalar(d, start, nodes)[0]))(zero)
+    np.testing.assert_allclose(np.asarray(again), np.asarray(grad), rtol=1e-10, atol=1e-12)

@@ -27,7 +27,10 @@ become tangent (`|n1 x n2|` below `_SINGULAR`): there the singular point is loca
 Gauss-Newton on `S1 = S2` with the normals parallel and the branch ends at it. Starts lying
 on a traced branch are dropped. The points and their parameters are interpolated by cubics
 on one parametrization, and points are added where a midpoint of the space curve is off
-either surface (evaluated on the parameter curves) by more than `tol`.
+either surface (evaluated on the parameter curves) by more than `tol`. The settled points
+then take one Newton step in JAX (`_polish_branch`, on the same 4 x 4 system with the
+plane held fixed) whose derivative is the implicit-function one, and the curves
+interpolate them: gradients reach control points, weights and knots of both surfaces.
 """
 
 import bisect
@@ -136,7 +139,7 @@ class _Net:
         points = concrete(surface.homogeneous_points())
         if knots_u is None or knots_v is None or points is None:
             raise ValueError(
-                "the intersection search needs concrete surfaces; to differentiate, find the "
+                "the intersection search needs concrete surfaces (under jit, say); find the "
                 "intersections first and pass them as `start=` inside the function"
             )
         p, q = surface.degree
@@ -409,6 +412,10 @@ class IntersectionCurve(eqx.Module):
       ends on both sides of the seam (open curves whose ends meet in space).
     - `ends_singular`: `(start, end)`: whether each end is a point where the surfaces are
       tangent (normals parallel: branches cross or touch there), found by Newton.
+    - `params`: the traced points the curves interpolate, `(n, 4)` rows `(u1, v1, u2, v2)`
+      (the first repeated at the end of a periodic branch), and `sites` their parameters
+      `w`, concrete: what `surface_intersections(..., start=branches)` polishes again.
+    - `periodic`: the curves are periodic interpolants.
     """
 
     curve: NURBSCurve
@@ -416,6 +423,9 @@ class IntersectionCurve(eqx.Module):
     uv2: NURBSCurve
     closed: bool = eqx.field(static=True)
     ends_singular: tuple[bool, bool] = eqx.field(static=True)
+    params: typing.Any = None
+    sites: typing.Any = None
+    periodic: bool = eqx.field(static=True, default=False)
 
 
 class _Pair:
@@ -697,7 +707,8 @@ def _insert(pair, params, space, intervals):
 def _fit(pair, params, periodic):
     """Cubic interpolants of the space points and both parameter paths on one chord-length
     parametrization, with points added until every midpoint is within `tol` of both
-    surfaces; returns `(curve, uv1, uv2)`.
+    surfaces; returns the points' parameters `(n, 4)` and their chord-length sites `w`
+    (`_branch_curves` builds the curves from them, differentiably).
 
     The count of points is raised to a multiple of `_BUCKET` (points added in the longest
     chords, which only makes the fit closer): `interpolate` compiles once per count, and
@@ -720,6 +731,7 @@ def _fit(pair, params, periodic):
         else:
             joint = interpolate(data, degree, w)
         knots, points = np.asarray(joint.knots), np.asarray(joint.control_points)
+        fitted = params, w
         # Checked at a quarter, the middle and three quarters of each interval: where the
         # parameter path crosses a knot of a surface (a jump in its second derivative)
         # the largest error need not sit in the middle.
@@ -727,14 +739,14 @@ def _fit(pair, params, periodic):
         checked = w[:-1, None] + fractions * np.diff(w)[:, None]
         # scipy evaluates the trial fits: their point counts change every round, and the
         # library's jitted evaluation would compile once per count (the result is a NURBSCurve).
-        fitted = BSpline(knots, points, degree)(checked.ravel())
-        on = np.clip(fitted[:, 3:], pair.lower, pair.upper)
+        values = BSpline(knots, points, degree)(checked.ravel())
+        on = np.clip(values[:, 3:], pair.lower, pair.upper)
         errors = [
             max(
                 np.linalg.norm(pair.nets[0](*x[:2])[0] - c),
                 np.linalg.norm(pair.nets[1](*x[2:])[0] - c),
             )
-            for x, c in zip(on, fitted[:, :3], strict=True)
+            for x, c in zip(on, values[:, :3], strict=True)
         ]
         bad = np.flatnonzero(np.array(errors).reshape(-1, 3).max(axis=1) > pair.tol)
         if bad.size == 0:
@@ -742,22 +754,134 @@ def _fit(pair, params, periodic):
         params, space, grew = _insert(pair, params, space, bad)
         if not grew:
             break
-    dtype = joint.control_points.dtype
+    return fitted  # the last points interpolated (and checked, unless the rounds ran out)
+
+
+def _polish_branch(s1, s2, params):
+    """One Newton step in JAX from the traced parameters `params` `(n, 4)` (held fixed):
+    `x - J^-1 F(x)`, `F = [S1 - S2; (S1 - p) . T]` with the point `p` and the unit tangent
+    `T` held fixed (the plane of `_Pair.correct`), or `F_4 = x_k - bound` at a point on a
+    domain boundary (where a march ended: the point slides along that boundary). Values
+    move by rounding; the derivative is the implicit-function one, reaching control points,
+    weights and knots of both surfaces. Where the surfaces are tangent (a singular end) the
+    system is singular: those points get no step (their parameters carry no gradient).
+
+    Returns `(points (n, 3), params (n, 4))`, the points `S1` at the new parameters (to
+    first order, which is exact in value and in derivative)."""
+    dtype = jnp.result_type(s1.control_points.dtype, s2.control_points.dtype, float)
+    x = jax.lax.stop_gradient(jnp.asarray(params, dtype))
+    d1 = s1.derivatives(x[:, 0], x[:, 1], 1)
+    d2 = s2.derivatives(x[:, 2], x[:, 3], 1)
+    p1, p2 = d1[:, 0, 0], d2[:, 0, 0]
+    j1 = jnp.stack([d1[:, 1, 0], d1[:, 0, 1]], axis=-1)  # (n, 3, 2)
+    j2 = jnp.stack([d2[:, 1, 0], d2[:, 0, 1]], axis=-1)
+    # The plane, fixed: through the point, across the tangent n1 x n2 (the chord of the
+    # neighbours where the surfaces are tangent).
+    fixed = jax.lax.stop_gradient(p1)
+    n1 = jnp.cross(j1[..., 0], j1[..., 1])
+    n2 = jnp.cross(j2[..., 0], j2[..., 1])
+    along = jax.lax.stop_gradient(jnp.cross(n1, n2))
+    sine = jnp.linalg.norm(along, axis=-1) / jax.lax.stop_gradient(
+        jnp.maximum(jnp.linalg.norm(n1, axis=-1) * jnp.linalg.norm(n2, axis=-1), 1e-300)
+    )
+    singular = sine < _SINGULAR
+    if len(fixed) > 1:
+        ahead = jnp.concatenate([fixed[1:], fixed[-1:]])
+        behind = jnp.concatenate([fixed[:1], fixed[:-1]])
+        chord = ahead - behind
+    else:
+        chord = jnp.ones_like(fixed)
+    along = jnp.where(singular[:, None], chord, along)
+    tangent = along / jnp.maximum(jnp.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
+    # Boundary points: the parameter nearest a domain end, if within rounding of it.
+    (a0, a1), (b0, b1) = s1.domain
+    (c0, c1), (e0, e1) = s2.domain
+    lower = jnp.stack([a0, b0, c0, e0]).astype(dtype)
+    upper = jnp.stack([a1, b1, c1, e1]).astype(dtype)
+    gaps = jax.lax.stop_gradient(jnp.minimum(jnp.abs(x - lower), jnp.abs(x - upper)))
+    k = jnp.argmin(gaps, axis=-1)
+    span = jax.lax.stop_gradient(jnp.max(upper - lower))
+    on_edge = jnp.take_along_axis(gaps, k[:, None], axis=-1)[:, 0] <= 1e-12 * (1 + span)
+    at_lower = jax.lax.stop_gradient(jnp.abs(x - lower) <= jnp.abs(x - upper))
+    bound = jnp.where(at_lower, lower, upper)
+    x_k = jnp.take_along_axis(x, k[:, None], axis=-1)[:, 0]
+    bound_k = jnp.take_along_axis(jnp.broadcast_to(bound, x.shape), k[:, None], axis=-1)[:, 0]
+    onehot = jax.nn.one_hot(k, 4, dtype=dtype)
+    plane = jnp.einsum("nd,ndk->nk", tangent, j1)
+    last_row = jnp.where(
+        on_edge[:, None], onehot, jnp.concatenate([plane, jnp.zeros_like(plane)], axis=-1)
+    )
+    last = jnp.where(on_edge, x_k - bound_k, jnp.einsum("nd,nd->n", p1 - fixed, tangent))
+    residual = jnp.concatenate([p1 - p2, last[:, None]], axis=-1)
+    jacobian = jnp.concatenate([jnp.concatenate([j1, -j2], axis=-1), last_row[:, None]], axis=1)
+    # The singular rows are replaced by the identity (and their residual by zero) so that
+    # the batched solve stays finite there.
+    jacobian = jnp.where(singular[:, None, None], jnp.eye(4, dtype=dtype), jacobian)
+    residual = jnp.where(singular[:, None], 0.0, residual)
+    step = jnp.linalg.solve(jacobian, residual[..., None])[..., 0]
+    points = p1 - jnp.einsum("ndk,nk->nd", j1, step[:, :2])
+    return points, x - step
+
+
+def _branch_curves(s1, s2, params, w, periodic):
+    """`(curve, uv1, uv2)`: the cubic interpolants, on the sites `w`, of the branch points
+    polished in JAX (`_polish_branch`): differentiable functions of both surfaces."""
+    points, params = _polish_branch(s1, s2, params)
+    data = jnp.concatenate([points, params], axis=1)
+    degree = min(3, len(data) - 1 - periodic)
+    w = jnp.asarray(w, data.dtype)
+    if periodic:
+        joint = interpolate(data[:-1], degree, w, closed=True)
+    else:
+        joint = interpolate(data, degree, w)
+    knots = joint.knots
     # The domain exactly [0, 1] (a periodic knot vector ends there only to rounding).
     knots = (knots - knots[degree]) / (knots[-degree - 1] - knots[degree])
     return tuple(
-        NURBSCurve(jnp.asarray(points[:, cols], dtype), degree, jnp.asarray(knots, dtype))
+        NURBSCurve(joint.control_points[:, cols], degree, knots)
         for cols in (slice(0, 3), slice(3, 5), slice(5, 7))
     )
 
 
-def surface_intersections(s1, s2, tol: float | None = None) -> list[IntersectionCurve]:
+def _primal(x):
+    """`x` without the tracers of `jax.grad` / `jax.jvp` around it (their primal values,
+    concrete outside `jit`), so that the search runs on the surfaces' values; other
+    tracers are returned as they are (the search then asks for `start=`)."""
+    while isinstance(x, jax.core.Tracer) and hasattr(x, "primal"):
+        x = x.primal
+    return x
+
+
+def surface_intersections(
+    s1, s2, tol: float | None = None, *, start=None
+) -> list[IntersectionCurve]:
     """Every branch of the intersection curve of two surfaces in 3D.
 
     Branches are traced from where a boundary curve of one surface meets the other and
     from flat sub-patch pairs (for loops inside both domains), marching on `n1 x n2` with
     Newton corrections onto both surfaces, and interpolated by cubics until the midpoints
     are within `tol` of both surfaces (see the module docstring).
+
+    Gradients: the search runs in NumPy on the surfaces' values; then every traced point
+    takes one Newton step in JAX (on both surfaces, in the fixed plane across the branch,
+    or along the domain boundary it ends on) whose derivative is the implicit-function
+    one, and the curves interpolate those points. So `jax.grad` of anything computed from
+    the returned curves reaches the control points, weights and knots of both surfaces,
+    and the call can sit directly inside the differentiated function::
+
+        jax.grad(lambda P: f(dn.surface_intersections(S1(P), S2)[0].curve))(P)
+
+    (under `jax.grad`, `jax.jvp` and the like the search takes the primal values; the
+    branch topology is that of those values, and the derivative is that of the branches
+    found). Under `jax.jit` the surfaces are not concrete: find the branches first, outside,
+    and pass them as `start=`, which skips the search and only takes the Newton step
+    (also the cheaper way to differentiate many times)::
+
+        branches = dn.surface_intersections(S1(P0), S2)
+        jax.jit(jax.grad(lambda P: f(dn.surface_intersections(S1(P), S2, start=branches)[0].curve)))
+
+    A branch that ends at a singular point gets no step there (the system is singular):
+    that end point follows `s1` at fixed parameters.
 
     Singular points, where the normals are parallel (two equal cylinders crossing, the
     Villarceau circles of a torus crossing on the bitangent plane), are not marched through:
@@ -766,9 +890,13 @@ def surface_intersections(s1, s2, tol: float | None = None) -> list[Intersection
 
     **Arguments:**
 
-    - `s1`, `s2`: `NURBSSurface`s in 3D (concrete: this search is not differentiable).
+    - `s1`, `s2`: `NURBSSurface`s in 3D (concrete, or traced by `jax.grad`; traced by
+      `jit` only with `start`).
     - `tol`: largest distance of the fitted curves from both surfaces; None:
       `1e-7 (1 + size)`, the size the diagonal of the box of both control nets.
+    - `start`: the list of `IntersectionCurve`s of an earlier call (on these surfaces or
+      ones close to them, with the same topology): the search is skipped, their points
+      are polished by one Newton step on `s1`, `s2` and interpolated again.
 
     **Returns:**
 
@@ -776,6 +904,36 @@ def surface_intersections(s1, s2, tol: float | None = None) -> list[Intersection
     """
     _check_surface(s1, "s1")
     _check_surface(s2, "s2")
+    if start is not None:
+        return [
+            IntersectionCurve(
+                *_branch_curves(s1, s2, b.params, b.sites, b.periodic),
+                b.closed,
+                b.ends_singular,
+                b.params,
+                b.sites,
+                b.periodic,
+            )
+            for b in start
+        ]
+    found = _search_branches(*(jax.tree.map(_primal, s) for s in (s1, s2)), tol)
+    return [
+        IntersectionCurve(
+            *_branch_curves(s1, s2, params, w, periodic),
+            closed,
+            ends,
+            params,
+            w,
+            periodic,
+        )
+        for params, w, periodic, closed, ends in found
+    ]
+
+
+def _search_branches(s1, s2, tol):
+    """`(params, w, periodic, closed, ends_singular)` of every branch, in NumPy."""
+    if any(concrete(s.control_points) is None for s in (s1, s2)):
+        _Net(s1 if concrete(s1.control_points) is None else s2)  # raises, naming `start=`
     size = _model_size(s1, s2)
     tol = 1e-7 * (1 + size) if tol is None else _check_tol(tol)
     pair = _Pair(s1, s2, tol, size)
@@ -789,8 +947,8 @@ def surface_intersections(s1, s2, tol: float | None = None) -> list[Intersection
         line = np.array([pair.point(x) for x in params])
         traced.append((line, params))
         space_closed = closed or np.linalg.norm(line[0] - line[-1]) <= 10 * tol
-        curve, uv1, uv2 = _fit(pair, params, periodic=closed)
-        branches.append(IntersectionCurve(curve, uv1, uv2, bool(space_closed), ends))
+        params, w = _fit(pair, params, periodic=closed)
+        branches.append((params, w, bool(closed), bool(space_closed), ends))
 
     def fresh(x0):
         """Not a tangential contact (reached from the branches that meet there), not on a

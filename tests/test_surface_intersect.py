@@ -100,16 +100,22 @@ def test_a_line_meets_the_sphere_where_the_geometry_says():
         assert abs(us[i] - s_k) < 3e-3 and abs(us[j] - t_k) < 3e-3
 
 
-def test_a_tangent_line_touches_the_sphere_once():
-    normal = np.array([0.2, -0.4, 0.9]) / np.linalg.norm([0.2, -0.4, 0.9])
-    along = np.array([0.3, 0.5, -0.2])
-    along -= (along @ normal) * normal
-    tangent = dn.NURBSCurve(np.array([normal - 2 * along, normal + 2 * along]), 1)
-    u, s, t = dn.curve_surface_intersections(tangent, SPHERE)
-    assert u.shape == (1,)
-    # A double root: the contact is found to the square root of the tolerance.
-    np.testing.assert_allclose(np.asarray(tangent(u))[0], normal, atol=1e-4)
-    np.testing.assert_allclose(np.asarray(SPHERE(s, t))[0], normal, atol=1e-4)
+def test_tangent_lines_touch_the_sphere_once():
+    # Lines tangent at the pole, at (0, -0.8, 0.6), and at random points (one of them in the
+    # next patch from where the search's start stops).
+    rng = np.random.default_rng(0)
+    normals = [np.array([0.0, 0.0, 1.0]), np.array([0.0, -0.8, 0.6])]
+    normals += [n / np.linalg.norm(n) for n in rng.normal(size=(4, 3))]
+    for normal in normals:
+        along = np.cross(normal, rng.normal(size=3))
+        along /= np.linalg.norm(along)
+        tangent = dn.NURBSCurve(np.array([normal - 2 * along, normal + 2 * along]), 1)
+        u, s, t, overlaps = dn.curve_surface_intersections(tangent, SPHERE, full_output=True)
+        assert u.shape == (1,) and overlaps == [], (normal, u, overlaps)
+        # A double root: the contact is known to about the square root of the rounding
+        # (1e-8); the bound leaves a factor of ten.
+        np.testing.assert_allclose(np.asarray(tangent(u))[0], normal, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(SPHERE(s, t))[0], normal, atol=1e-6)
 
 
 def test_a_curve_lying_on_the_sphere_is_an_overlap():

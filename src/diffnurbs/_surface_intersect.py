@@ -343,6 +343,20 @@ def _polish_curve_surface(curve, surface, u, s, t):
     return u - step[:, 0], s - step[:, 1], t - step[:, 2]
 
 
+def _refined(curve, surface, u, s, t):
+    """Gauss-Newton on the whole curve and surface from the search's points: a point the
+    search polished on one Bezier patch stops on the patch's edge when the contact lies in
+    the next patch, and a tangential contact converges only linearly."""
+    if not len(u):
+        return u, s, t
+    (s0, s1), (t0, t1) = surface.domain
+    u, s, t = (jnp.asarray(x) for x in (u, s, t))
+    for _ in range(NEWTON_STEPS):
+        u, s, t = _polish_curve_surface(curve, surface, u, s, t)
+        u, s, t = jnp.clip(u, *curve.domain), jnp.clip(s, s0, s1), jnp.clip(t, t0, t1)
+    return np.asarray(u), np.asarray(s), np.asarray(t)
+
+
 def _model_size(*objects):
     points = [np.asarray(concrete(o.control_points)).reshape(-1, 3) for o in objects]
     points = np.concatenate(points)
@@ -362,8 +376,9 @@ def curve_surface_intersections(
     - `surface`: a `NURBSSurface` in 3D.
     - `tol`: how close the curve and the surface must come to count as an intersection;
       None: `1e-9 (1 + size)`, the size the diagonal of the box of both control nets.
-      Intersections closer than `sqrt(tol (1 + size))` to each other count once (a
-      tangential contact is found only to that accuracy).
+      Intersections closer than `sqrt(tol (1 + size))` to each other count once (the
+      starts of a tangential contact spread that far; Gauss-Newton on the whole curve and
+      surface then brings it to about the square root of the rounding).
     - `start`: `(u, s, t)` found before: the search is skipped and only the last Newton step
       is taken, so the call can sit inside a function that `jax.grad` differentiates
       (the search needs concrete inputs).
@@ -382,6 +397,7 @@ def curve_surface_intersections(
     if start is None:
         tol = 1e-9 * (1 + _model_size(curve, surface)) if tol is None else _check_tol(tol)
         u, s, t, overlaps = _curve_surface_search(curve, surface, tol)
+        u, s, t = _refined(curve, surface, u, s, t)
     else:
         u, s, t = start
     dtype = curve.knots.dtype

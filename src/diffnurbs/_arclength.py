@@ -189,7 +189,7 @@ def _hermite_curve(curve, fractions: np.ndarray, table):
     `[0, L]` (double interior knots). Differentiable with respect to `curve`."""
     total = table[2][-1]
     s = jnp.asarray(fractions, dtype=total.dtype) * total
-    ders = curve._derivatives(curve._parameter_at_length(s, table), 1)
+    ders = _at_lengths(curve, s, table)
     points, tangents = ders[:, 0], ders[:, 1] / safe_norm(ders[:, 1])[:, None]
     h = jnp.diff(s)[:, None] / 3
     inner = jnp.stack([points[:-1] + h * tangents[:-1], points[1:] - h * tangents[1:]], axis=1)
@@ -204,13 +204,20 @@ _SAMPLES_PER_SEGMENT = 8
 _MAX_SEGMENTS = 2**17
 
 
+def _at_lengths(curve, s: Array, table) -> Array:
+    """`(C, C')` at the lengths `s`, shape `(len(s), 2, dim)`, computed on `s` padded to a
+    power of two and at least 1024 long: the rounds of `unit_speed_curve` and its result
+    then compile one or two shapes (each shape costs a compilation of the root finder, far
+    more than evaluating a thousand points)."""
+    size = 1 << max(int(len(s) - 1).bit_length(), 10)
+    padded = jnp.concatenate([s, jnp.zeros(size - len(s), s.dtype)])
+    return curve._derivatives(curve._parameter_at_length(padded, table), 1)[: len(s)]
+
+
 def _padded(curve, s: np.ndarray, table) -> tuple[np.ndarray, np.ndarray]:
-    """Points and first derivatives of `curve` at the lengths `s`, computed on an array
-    padded to a power of two (so the rounds of `unit_speed_curve` compile a few shapes)."""
-    size = 1 << max(int(len(s) - 1).bit_length(), 4)
-    padded = jnp.asarray(np.concatenate([s, np.zeros(size - len(s))]))
-    ders = np.asarray(curve._derivatives(curve._parameter_at_length(padded, table), 1))
-    return ders[: len(s), 0], ders[: len(s), 1]
+    """Points and first derivatives of `curve` at the lengths `s`, in NumPy."""
+    ders = np.asarray(_at_lengths(curve, jnp.asarray(s), table))
+    return ders[:, 0], ders[:, 1]
 
 
 def _hermite(points, tangents, s, at):

@@ -200,14 +200,17 @@ def _contacts(overlaps, c1, c2, tol):
     """
     if not overlaps:
         return [], []
-    ends = np.array([(a + (b - a) / 4, b - (b - a) / 4) for (a, b), _ in overlaps])
-    quarters = jnp.asarray(ends.ravel())
-    gaps = np.linalg.norm(
-        np.asarray(c1(quarters)) - np.asarray(c2(c2.closest_point(c1(quarters)))), axis=-1
-    ).reshape(ends.shape)
+    tops1, tops2 = pieces(c1), pieces(c2)
+
+    def gap(u):  # distance from C1(u) to C2, on the Bezier pieces (NumPy: nothing compiles)
+        p = next(q for q in tops1 if q.a <= u <= q.b)
+        x = bezier_point(p.h, (u - p.a) / (p.b - p.a), p.rational)[0]
+        return min(_distance_to(x, q) for q in tops2)
+
     true, contacts = [], []
-    for interval, gap in zip(overlaps, gaps, strict=True):
-        if gap.max() <= tol / 100:
+    for interval in overlaps:
+        (a, b), _ = interval
+        if max(gap(a + (b - a) / 4), gap(b - (b - a) / 4)) <= tol / 100:
             true.append(interval)
             continue
         (a, b), (c, d) = interval

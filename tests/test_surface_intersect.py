@@ -61,6 +61,10 @@ def check_fit(branches, s1, s2, tol):
             (u0, u1), (v0, v1) = (np.asarray(d) for d in surface.domain)
             on = np.asarray(surface(np.clip(params[:, 0], u0, u1), np.clip(params[:, 1], v0, v1)))
             assert np.abs(on - x).max() <= tol, np.abs(on - x).max()
+            # The ends lie in the domain as they are (a branch ending on a boundary must not
+            # come out beyond it by rounding): the surface evaluates there without a clip.
+            ends = params[[0, -1]]
+            np.testing.assert_allclose(surface(ends[:, 0], ends[:, 1]), x[[0, -1]], atol=tol)
 
 
 def distance_to_polylines(points, lines):

@@ -853,8 +853,22 @@ def _branch_curves(s1, s2, params, w, periodic):
     knots = joint.knots
     # The domain exactly [0, 1] (a periodic knot vector ends there only to rounding).
     knots = (knots - knots[degree]) / (knots[-degree - 1] - knots[degree])
+    control = joint.control_points
+    if not periodic:
+        # The ends of the parameter curves inside the domains: a branch ending on a domain
+        # boundary would otherwise come out 1 ulp beyond it, and `surface(*uv(1.0).T)` raise.
+        # (Only the end control points: interior ones may lie outside where the curve
+        # hugs the boundary.)
+        lower = jnp.concatenate(
+            [jnp.full(3, -jnp.inf), *(jnp.asarray(d)[:, 0] for d in (s1.domain, s2.domain))]
+        )
+        upper = jnp.concatenate(
+            [jnp.full(3, jnp.inf), *(jnp.asarray(d)[:, 1] for d in (s1.domain, s2.domain))]
+        )
+        ends = jnp.clip(control[jnp.array([0, -1])], lower, upper)
+        control = control.at[jnp.array([0, -1])].set(ends)
     return tuple(
-        NURBSCurve(joint.control_points[:, cols], degree, knots)
+        NURBSCurve(control[:, cols], degree, knots)
         for cols in (slice(0, 3), slice(3, 5), slice(5, 7))
     )
 

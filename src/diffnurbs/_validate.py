@@ -134,13 +134,16 @@ def check_control_count(count, degree, name="control points", at_most=None, sour
 
 def check_parameter(u, lower, upper, name="u"):
     """Raise for concrete parameters outside `[lower, upper]`, naming the first one and
-    the domain; traced ones pass."""
+    the domain; traced ones pass. A few units of rounding beyond an end are not an error
+    (a parameter computed as `1.0` may come out `1.0000000000000002`): the evaluators
+    clamp to the domain."""
     values, lo, hi = concrete(u), concrete(lower), concrete(upper)
     if values is None or lo is None or hi is None or values.size == 0:
         return
     if not np.all(np.isfinite(values)):
         raise ValueError(f"{name} must be finite")
-    outside = (values < lo) | (values > hi)
+    slack = 16 * np.finfo(np.result_type(values.dtype, float)).eps * max(1.0, abs(lo), abs(hi))
+    outside = (values < lo - slack) | (values > hi + slack)
     if np.any(outside):
         where = tuple(int(i) for i in np.argwhere(outside)[0])
         at = f" at index {where}" if where else ""

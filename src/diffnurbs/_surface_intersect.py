@@ -274,6 +274,12 @@ def _curve_surface_search(curve, surface, tol):
         p, q, i, j, depth = stack.pop()
         if np.any(p.low > q.high + tol) or np.any(q.low > p.high + tol):
             continue
+        # A piece inside the merging radius of a point found already can only find that
+        # point again (near a tangential contact at a pole of a sphere, where the patches
+        # degenerate, thousands of sliver pairs would otherwise each be polished).
+        if any(np.linalg.norm(np.maximum(abs(p.low - x), abs(p.high - x))) <= radius
+               for *_, x in found):  # fmt: skip
+            continue
         if p not in on_surface:
             on_surface[p] = _lies_on(p, tops_s, tol, radius)
             if on_surface[p]:

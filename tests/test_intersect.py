@@ -95,6 +95,24 @@ def test_a_tangential_contact_is_a_point_not_an_overlap(shift):
     np.testing.assert_allclose(space[0](u1), [[shift, 0.0, 1.0]], atol=1e-7)
 
 
+def test_a_rotated_tangential_contact_is_one_point():
+    # Away from the axes, starts near a contact stop at many points about sqrt(tol) apart
+    # (linear convergence, rounding in every coordinate): they must come back as one.
+    # y = (x - a)^2 touches y = 0 at x = a; within `tol` of the line for |x - a| <= sqrt(tol).
+    rng = np.random.default_rng(5)
+    tol = 1e-9
+    for _ in range(20):
+        a, angle = rng.uniform(0.1, 0.9), rng.uniform(0.0, np.pi)
+        turn = np.array([[np.cos(angle), np.sin(angle)], [-np.sin(angle), np.cos(angle)]])
+        parabola = np.array([[0.0, a**2], [0.5, a**2 - a], [1.0, (1 - a) ** 2]]) @ turn
+        line = np.array([[-0.2, 0.0], [1.2, 0.0]]) @ turn
+        c1, c2 = dn.NURBSCurve(parabola, 2), dn.NURBSCurve(line, 1)
+        u1, u2, overlaps = dn.curve_intersections(c1, c2, tol, full_output=True)
+        assert overlaps == [] and u1.shape == (1,), (a, angle, u1, overlaps)
+        assert np.linalg.norm(c1(u1) - c2(u2)) <= tol
+        assert abs(float(u1[0]) - a) <= np.sqrt(tol), (a, u1)  # the parabola's x is u
+
+
 def test_an_overlap_is_reported_as_an_interval():
     rng = np.random.default_rng(4)
     curve = dn.NURBSCurve(rng.normal(size=(4, 2)), 3)  # one Bezier piece

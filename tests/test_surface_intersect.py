@@ -339,6 +339,32 @@ def test_random_bicubic_patches_against_a_dense_brute_force():
         assert distance_to_polylines(x[::50], [brute]).max() <= 2 / 300
 
 
+def test_every_branch_of_two_height_fields_once():
+    # Two height fields over one square (x = u, y = v for both) meet where z1 - z2 = 0: the
+    # zero contour of the difference on a fine grid (marching squares, matplotlib) has as
+    # many pieces, and as many closed ones, as there are branches, none traced twice.
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("agg")
+    import matplotlib.pyplot as plt
+
+    rng = np.random.default_rng(2)
+    s1, s2 = height_field(rng, (10, 10), 0.3, 0.7), height_field(rng, (10, 10), 0.3, 0.7)
+    branches = dn.surface_intersections(s1, s2)
+    check_fit(branches, s1, s2, 1e-7 * (1 + math.sqrt(3)))
+    grid = np.linspace(0.0, 1.0, 801)
+    u, v = (x.ravel() for x in np.meshgrid(grid, grid, indexing="ij"))
+    difference = np.asarray(s1(u, v))[:, 2] - np.asarray(s2(u, v))[:, 2]
+    pieces = plt.contour(grid, grid, difference.reshape(801, 801).T, [0.0]).allsegs[0]
+    plt.close("all")
+    loops = sum(np.allclose(piece[0], piece[-1]) for piece in pieces)
+    assert loops >= 2  # the case asks something: loops inside the square, not only arcs
+    assert (len(branches), sum(b.closed for b in branches)) == (len(pieces), loops)
+    lines = samples(branches, 2001)
+    for k, line in enumerate(lines):  # distinct branches of generic surfaces do not meet
+        others = [x for j, x in enumerate(lines) if j != k]
+        assert distance_to_polylines(line, others).min() > 1e-3
+
+
 def test_bad_input_is_named():
     with pytest.raises(ValueError, match="curve must be a curve in 3D"):
         dn.curve_surface_intersections(dn.circle(1.0), SPHERE)

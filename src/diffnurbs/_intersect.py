@@ -203,24 +203,32 @@ def _contacts(overlaps, c1, c2, tol):
     tops1, tops2 = pieces(c1), pieces(c2)
 
     def gap(u):  # distance from C1(u) to C2, on the Bezier pieces (NumPy: nothing compiles)
-        p = next(q for q in tops1 if q.a <= u <= q.b)
-        x = bezier_point(p.h, (u - p.a) / (p.b - p.a), p.rational)[0]
-        return min(_distance_to(x, q) for q in tops2)
+        return min(_distance_to(_point_at(tops1, u), q) for q in tops2)
 
     true, contacts = [], []
     for interval in overlaps:
-        (a, b), _ = interval
+        (a, b), (c, d) = interval
         if max(gap(a + (b - a) / 4), gap(b - (b - a) / 4)) <= tol / 100:
             true.append(interval)
-            continue
-        (a, b), (c, d) = interval
-        u, v = jnp.asarray([(a + b) / 2]), jnp.asarray([(c + d) / 2])
-        for _ in range(NEWTON_STEPS):
-            u, v = polish(c1, c2, u, v)
-            u, v = (jnp.clip(x, *curve.domain) for x, curve in ((u, c1), (v, c2)))
-        if np.linalg.norm(np.asarray(c1(u)) - np.asarray(c2(v))) <= tol:
-            contacts.append((float(u[0]), float(v[0])))
+        elif (point := _contact(c1, c2, (a + b) / 2, (c + d) / 2, tol)) is not None:
+            contacts.append(point)
     return true, contacts
+
+
+def _point_at(tops, u):
+    """The point at `u` of the curve cut into the Bezier pieces `tops` (NumPy)."""
+    p = next(q for q in tops if q.a <= u <= q.b)
+    return bezier_point(p.h, (u - p.a) / (p.b - p.a), p.rational)[0]
+
+
+def _contact(c1, c2, u, v, tol):
+    """`(u1, u2)` of the contact Gauss-Newton reaches from `(u, v)` on the whole curves, or
+    None when the curves are farther apart than `tol` there."""
+    start = jnp.asarray([u]), jnp.asarray([v])
+    u, v = newton_to_rounding(lambda u, v: polish(c1, c2, u, v), start, (c1.domain, c2.domain))
+    if np.linalg.norm(np.asarray(c1(u)) - np.asarray(c2(v))) <= tol:
+        return float(u[0]), float(v[0])
+    return None
 
 
 def _merged(found, overlaps, c1, c2, tol):
@@ -246,9 +254,35 @@ def _merged(found, overlaps, c1, c2, tol):
             continue
         points.append(x)
         result.append((u, v))
+    return (*_contacts_merged(result, c1, c2, tol), overlaps)
+
+
+def _contacts_merged(found, c1, c2, tol):
+    """`(u1, u2)`: the points `found` (sorted along `c1`), each run of them between which
+    the curves stay within `tol` of each other replaced by its one contact point. Starts
+    near a tangential contact converge only linearly, so in general (not axis-aligned data)
+    they stop at many points about `sqrt(tol)` apart along it."""
+    tops1, tops2 = pieces(c1), pieces(c2)
+    runs = []
+    for u, v in found:
+        if runs:
+            (a, c) = runs[-1][-1]
+            middle = _point_at(tops1, (a + u) / 2) - _point_at(tops2, (c + v) / 2)
+            if np.linalg.norm(middle) <= tol:
+                runs[-1].append((u, v))
+                continue
+        runs.append([(u, v)])
+    result = []
+    for run in runs:
+        if len(run) == 1:
+            result += run
+            continue
+        (a, c), (b, d) = run[0], run[-1]
+        point = _contact(c1, c2, (a + b) / 2, (c + d) / 2, tol)
+        result += run if point is None else [point]
     u1 = np.array([u for u, _ in result])
     u2 = np.array([v for _, v in result])
-    return u1, u2, overlaps
+    return u1, u2
 
 
 def _join(intervals):
@@ -260,6 +294,25 @@ def _join(intervals):
         else:
             joined.append(((a, b), (c, d)))
     return joined
+
+
+def newton_to_rounding(step, params, domains):
+    """Apply `step` (a Newton step on arrays of parameters) from `params`, clipping each
+    array into its `(low, high)` of `domains`, until no parameter moves by more than rounding
+    (16 ulps of its domain's length), at most `NEWTON_STEPS` times. A crossing converges in
+    a few steps; a tangential contact only linearly, halving its error per step."""
+    for _ in range(NEWTON_STEPS):
+        moved = tuple(
+            jnp.clip(x, low, high) for x, (low, high) in zip(step(*params), domains, strict=True)
+        )
+        change = max(
+            float(jnp.max(jnp.abs(new - old), initial=0.0)) / float(high - low)
+            for new, old, (low, high) in zip(moved, params, domains, strict=True)
+        )
+        params = moved
+        if change <= 16 * np.finfo(float).eps:
+            break
+    return params
 
 
 def polish(c1, c2, u1, u2):

@@ -51,6 +51,7 @@ from ._intersect import (
     bezier_point,
     halve,
     homogeneous_bezier,
+    newton_to_rounding,
     pieces,
 )
 from ._knotops import bezier_pieces, span_breaks
@@ -74,15 +75,16 @@ _BUCKET = 32
 
 def _patch_point(h, s, t, rational):
     """`(S, S_s, S_t)` of a Bezier patch with homogeneous net `h` `(n + 1, m + 1, dim + 1)`
-    (or the plain net when not rational) at local parameters `(s, t)` in `[0, 1]`."""
+    (or the plain net when not rational) at local parameters `(s, t)` in `[0, 1]`; a stack
+    of patches `(n + 1, m + 1, ..., dim + 1)` gives a stack of results."""
     row, row_s = homogeneous_bezier(h, s)
     point, d_t = homogeneous_bezier(row, t)
     d_s, _ = homogeneous_bezier(row_s, t)
     if not rational:
         return point, d_s, d_t
-    w = point[-1]
-    x = point[:-1] / w
-    return x, (d_s[:-1] - x * d_s[-1]) / w, (d_t[:-1] - x * d_t[-1]) / w
+    w = point[..., -1:]
+    x = point[..., :-1] / w
+    return x, (d_s[..., :-1] - x * d_s[..., -1:]) / w, (d_t[..., :-1] - x * d_t[..., -1:]) / w
 
 
 class _Patch:
@@ -267,6 +269,7 @@ def _curve_surface_search(curve, surface, tol):
     """`(u, s, t, overlaps)` in NumPy, sorted along the curve."""
     tops_c, tops_s = pieces(curve), _Net(surface).flat_patches()
     found, overlaps = [], []
+    found_at = ()  # the points of `found`, as one array
     stack = [(p, q, i, j, 0) for i, p in enumerate(tops_c) for j, q in enumerate(tops_s)]
     on_surface = {}  # piece -> whether it lies on the surface (asked once per piece)
     radius = _merge_radius(tol, _model_size(curve, surface))
@@ -277,9 +280,10 @@ def _curve_surface_search(curve, surface, tol):
         # A piece inside the merging radius of a point found already can only find that
         # point again (near a tangential contact at a pole of a sphere, where the patches
         # degenerate, thousands of sliver pairs would otherwise each be polished).
-        if any(np.linalg.norm(np.maximum(abs(p.low - x), abs(p.high - x))) <= radius
-               for *_, x in found):  # fmt: skip
-            continue
+        if len(found_at):
+            farthest = np.maximum(abs(p.low - found_at), abs(p.high - found_at))
+            if np.any(np.linalg.norm(farthest, axis=1) <= radius):
+                continue
         if p not in on_surface:
             on_surface[p] = _lies_on(p, tops_s, tol, radius)
             if on_surface[p]:
@@ -298,6 +302,7 @@ def _curve_surface_search(curve, surface, tol):
                 s = top_q.u[0] + s * (top_q.u[1] - top_q.u[0])
                 t = top_q.v[0] + t * (top_q.v[1] - top_q.v[0])
                 found.append((u, s, t, gap, point))
+                found_at = np.array([x for *_, x in found])
             continue
         if p.size >= q.size:
             stack += [(half, q, i, j, depth + 1) for half in p.halves()]
@@ -355,11 +360,11 @@ def _refined(curve, surface, u, s, t):
     the next patch, and a tangential contact converges only linearly."""
     if not len(u):
         return u, s, t
-    (s0, s1), (t0, t1) = surface.domain
-    u, s, t = (jnp.asarray(x) for x in (u, s, t))
-    for _ in range(NEWTON_STEPS):
-        u, s, t = _polish_curve_surface(curve, surface, u, s, t)
-        u, s, t = jnp.clip(u, *curve.domain), jnp.clip(s, s0, s1), jnp.clip(t, t0, t1)
+    u, s, t = newton_to_rounding(
+        lambda *x: _polish_curve_surface(curve, surface, *x),
+        tuple(jnp.asarray(x) for x in (u, s, t)),
+        (curve.domain, *surface.domain),
+    )
     return np.asarray(u), np.asarray(s), np.asarray(t)
 
 
@@ -652,49 +657,134 @@ def _boundary_starts(s1, s2, tol):
     return starts
 
 
+def _stacked(net):
+    """`(h, u, v)` of every Bezier patch of a `_Net`, stacked along a first axis."""
+    patches = net.flat_patches()
+    return (
+        np.stack([q.h for q in patches]),
+        np.array([q.u for q in patches]),
+        np.array([q.v for q in patches]),
+    )
+
+
+def _shapes(h, rational):
+    """`(low, high, size, deviation, along_u)` of a stack of patch nets `h` `(N, n + 1,
+    m + 1, dim + 1)`, as `_Patch` computes them one at a time (`along_u`: whether the patch
+    is longer in `u`, the direction it is halved in)."""
+    points = h[..., :-1] / h[..., -1:] if rational else h
+    low, high = points.min(axis=(1, 2)), points.max(axis=(1, 2))
+    a = np.linspace(0, 1, h.shape[1])[None, :, None, None]
+    b = np.linspace(0, 1, h.shape[2])[None, None, :, None]
+    p00, p10 = points[:, :1, :1], points[:, -1:, :1]
+    p11, p01 = points[:, -1:, -1:], points[:, :1, -1:]
+    bilinear = (1 - a) * (1 - b) * p00 + a * (1 - b) * p10 + a * b * p11 + (1 - a) * b * p01
+    deviation = np.linalg.norm(points - bilinear, axis=-1).max(axis=(1, 2))
+    along_u = np.linalg.norm(p10 - p00, axis=-1) + np.linalg.norm(p11 - p01, axis=-1)
+    along_v = np.linalg.norm(p01 - p00, axis=-1) + np.linalg.norm(p11 - p10, axis=-1)
+    size = np.linalg.norm(high - low, axis=1)
+    return low, high, size, deviation, (along_u >= along_v)[:, 0, 0]
+
+
+def _halves(side, along_u):
+    """The two halves `(h, u, v)` of each patch of a stack, across its longer direction."""
+    h, u, v = side
+    left, right = np.empty_like(h), np.empty_like(h)
+    (lu, ru), (lv, rv) = (u.copy(), u.copy()), (v.copy(), v.copy())
+    for axis, rows, span, (low, high) in ((1, along_u, u, (lu, ru)), (2, ~along_u, v, (lv, rv))):
+        # `halve` works along its first axis; the stack rides along behind it.
+        halves = halve(np.moveaxis(h[rows], axis, 0))
+        left[rows], right[rows] = (np.moveaxis(x, 0, axis) for x in halves)
+        middle = span[rows].mean(axis=1)
+        low[rows, 1], high[rows, 0] = middle, middle
+    return (left, lu, lv), (right, ru, rv)
+
+
 def _interior_pairs(pair, tol):
-    """`(centres, reach)`: the parameters of the centres of flat sub-patch pairs whose boxes
-    overlap (starts for loops inside both domains) and the sum of the pair's sizes."""
-    found = []
-    stack = [(p, q, 0) for p in pair.nets[0].flat_patches() for q in pair.nets[1].flat_patches()]
-    while stack:
-        p, q, depth = stack.pop()
-        if np.any(p.low > q.high + tol) or np.any(q.low > p.high + tol):
-            continue
-        flat = p.deviation <= _START_FLAT * max(p.size, tol) and q.deviation <= _START_FLAT * max(
-            q.size, tol
+    """`(centres, points, reach)`: for every flat sub-patch pair whose boxes overlap (the
+    starts of loops inside both domains), the parameters of the patches' centres, where the
+    tangent planes there cross (nearest the centres: a first Gauss-Newton step), and the sum
+    of the pair's sizes.
+
+    One level of the subdivision at a time, every pair at once."""
+    sides = [_stacked(net) for net in pair.nets]
+    rational = [net.patches[0][0].rational for net in pair.nets]
+    first, second = np.indices((len(sides[0][0]), len(sides[1][0]))).reshape(2, -1)
+    a, b = (tuple(x[k] for x in side) for side, k in zip(sides, (first, second), strict=True))
+    centres, points, reach = [], [], []
+    for depth in range(25):
+        (la, ha, za, da, ua), (lb, hb, zb, db, ub) = (
+            _shapes(a[0], rational[0]),
+            _shapes(b[0], rational[1]),
         )
-        if flat or depth >= 24:
-            centre = [sum(p.u) / 2, sum(p.v) / 2, sum(q.u) / 2, sum(q.v) / 2]
-            found.append((np.array(centre), p.size + q.size))
-            continue
-        if p.size >= q.size:
-            stack += [(half, q, depth + 1) for half in p.halves()]
-        else:
-            stack += [(p, half, depth + 1) for half in q.halves()]
-    return found
+        meet = ~(np.any(la > hb + tol, axis=1) | np.any(lb > ha + tol, axis=1))
+        flat = (da <= _START_FLAT * np.maximum(za, tol)) & (db <= _START_FLAT * np.maximum(zb, tol))
+        if depth == 24:
+            flat[:] = True
+        done = meet & flat
+        centres.append(np.column_stack([x[done].mean(axis=1) for x in (*a[1:], *b[1:])]))
+        points.append(
+            _tangent_planes_crossing([x[done] for x in a], [x[done] for x in b], rational)
+        )
+        reach.append((za + zb)[done])
+        more = meet & ~flat
+        split_a = more & (za >= zb)
+        split_b = more & (za < zb)
+        halves_a = _halves(tuple(x[split_a] for x in a), ua[split_a])
+        halves_b = _halves(tuple(x[split_b] for x in b), ub[split_b])
+        a = tuple(
+            np.concatenate([*(half[k] for half in halves_a), x[split_b], x[split_b]])
+            for k, x in enumerate(a)
+        )
+        b = tuple(
+            np.concatenate([x[split_a], x[split_a], *(half[k] for half in halves_b)])
+            for k, x in enumerate(b)
+        )
+        if not len(a[0]):
+            break
+    return np.concatenate(centres), np.concatenate(points), np.concatenate(reach)
 
 
-def _polyline_gap(point, polyline):
-    """`(distance, segment length)` from a point to the nearest segment of a polyline."""
+def _tangent_planes_crossing(a, b, rational):
+    """The point nearest the centres of the patch stacks `a` and `b` (each `(h, u, v)`) where
+    their tangent planes there cross: the first step of `_Pair.onto`, for every pair at once."""
+    frames = []
+    for (h, u, v), curved in zip((a, b), rational, strict=True):
+        x, x_s, x_t = _patch_point(np.moveaxis(h, 0, 2), 0.5, 0.5, curved)
+        jacobian = np.stack([x_s / np.diff(u), x_t / np.diff(v)], axis=-1)  # (N, 3, 2)
+        frames.append((x, jacobian))
+    (x1, j1), (x2, j2) = frames
+    step = np.linalg.pinv(np.concatenate([j1, -j2], axis=-1)) @ (x2 - x1)[..., None]
+    return x1 + (j1 @ step[:, :2])[..., 0]
+
+
+def _polyline_gaps(points, polyline):
+    """`(distances, segment lengths)`: from each of `points` `(M, 3)` to the nearest segment
+    of a polyline, and that segment's length (in blocks: `M x segments` pairs)."""
     a, b = polyline[:-1], polyline[1:]
     d = b - a
     length2 = np.maximum(np.sum(d * d, axis=1), 1e-300)
-    along = np.clip(np.sum((point - a) * d, axis=1) / length2, 0, 1)
-    gaps = np.linalg.norm(a + along[:, None] * d - point, axis=1)
-    k = int(np.argmin(gaps))
-    return gaps[k], np.sqrt(length2[k])
+    gaps, lengths = np.empty(len(points)), np.empty(len(points))
+    block = max(1, 2**20 // len(a))
+    for k in range(0, len(points), block):
+        x = points[k : k + block, None]
+        along = np.clip(np.sum((x - a) * d, axis=-1) / length2, 0, 1)
+        distances = np.linalg.norm(a + along[..., None] * d - x, axis=-1)
+        nearest = np.argmin(distances, axis=1)
+        gaps[k : k + block] = distances[np.arange(len(x)), nearest]
+        lengths[k : k + block] = np.sqrt(length2[nearest])
+    return gaps, lengths
 
 
 def _on_branch(x0, point, traced, tol, span):
-    """Whether a start lies on a traced branch: near its polyline in space (within a
-    hundredth of the local segment, which the chord's sag stays well inside, or `10 tol`)
-    and in the parameters (a point on a seam of a closed surface has two)."""
+    """Whether a start lies on a traced branch: near its polyline in space (within twice
+    the largest sag of a chord whose arc turns by `_MAX_TURN`, `tan(turn / 4) / 2 ~ turn / 8`
+    of its length, or `10 tol`) and in the parameters (a point on a seam of a closed surface
+    has two, a domain apart)."""
     for line, params in traced:
-        gap, length = _polyline_gap(point, line)
-        if gap <= max(1e-2 * length, 10 * tol):
-            gap, length = _polyline_gap(x0, params)
-            if gap <= max(1e-2 * length, 1e-9 * span):
+        (gap,), (length,) = _polyline_gaps(point[None], line)
+        if gap <= max(_MAX_TURN / 4 * length, 10 * tol):
+            (gap,), (length,) = _polyline_gaps(x0[None], params)
+            if gap <= max(_MAX_TURN / 4 * length, 1e-9 * span):
                 return True
     return False
 
@@ -779,7 +869,8 @@ def _fit(pair, params, periodic):
     return fitted  # the last points interpolated (and checked, unless the rounds ran out)
 
 
-def _polish_branch(s1, s2, params):
+@eqx.filter_jit
+def _polish_branch(s1, s2, params, ahead, behind):
     """One Newton step in JAX from the traced parameters `params` `(n, 4)` (held fixed):
     `x - J^-1 F(x)`, `F = [S1 - S2; (S1 - p) . T]` with the point `p` and the unit tangent
     `T` held fixed (the plane of `_Pair.correct`), or `F_4 = x_k - bound` at a point on a
@@ -787,6 +878,10 @@ def _polish_branch(s1, s2, params):
     move by rounding; the derivative is the implicit-function one, reaching control points,
     weights and knots of both surfaces. Where the surfaces are tangent (a singular end) the
     system is singular: those points get no step (their parameters carry no gradient).
+
+    `ahead`, `behind`: the indices of each point's neighbours along its branch (itself at
+    an end): the points of several branches are polished in one call (one compiled
+    program for all of them, `_polish_branches`).
 
     Returns `(points (n, 3), params (n, 4))`, the points `S1` at the new parameters (to
     first order, which is exact in value and in derivative)."""
@@ -807,12 +902,7 @@ def _polish_branch(s1, s2, params):
         jnp.maximum(jnp.linalg.norm(n1, axis=-1) * jnp.linalg.norm(n2, axis=-1), 1e-300)
     )
     singular = sine < _SINGULAR
-    if len(fixed) > 1:
-        ahead = jnp.concatenate([fixed[1:], fixed[-1:]])
-        behind = jnp.concatenate([fixed[:1], fixed[:-1]])
-        chord = ahead - behind
-    else:
-        chord = jnp.ones_like(fixed)
+    chord = jnp.where((ahead == behind)[:, None], 1.0, fixed[ahead] - fixed[behind])
     along = jnp.where(singular[:, None], chord, along)
     tangent = along / jnp.maximum(jnp.linalg.norm(along, axis=-1, keepdims=True), 1e-300)
     # Boundary points: the parameter nearest a domain end, if within rounding of it.
@@ -845,11 +935,31 @@ def _polish_branch(s1, s2, params):
     return points, x - step
 
 
-def _branch_curves(s1, s2, params, w, periodic):
+def _polish_branches(s1, s2, branches):
+    """`[(points, params), ...]`: `_polish_branch` on the traced parameters of every branch
+    in `branches`, in one call, padded to a power of two points (a few compiled programs
+    serve every call)."""
+    sizes = [len(params) for params in branches]
+    total = sum(sizes)
+    padded = 1 << max(5, (total - 1).bit_length())
+    params = np.concatenate([*map(np.asarray, branches), np.zeros((padded - total, 4))])
+    index = np.arange(padded)
+    ends = np.cumsum(sizes)
+    last = np.isin(index, ends - 1) | (index >= total)
+    first = np.isin(index, ends - np.array(sizes)) | (index >= total)
+    ahead = np.where(last, index, index + 1)
+    behind = np.where(first, index, index - 1)
+    points, params = _polish_branch(s1, s2, params, ahead, behind)
+    return [
+        (points[end - size : end], params[end - size : end])
+        for end, size in zip(ends, sizes, strict=True)
+    ]
+
+
+def _branch_curves(s1, s2, polished, w, periodic):
     """`(curve, uv1, uv2)`: the cubic interpolants, on the sites `w`, of the branch points
-    polished in JAX (`_polish_branch`): differentiable functions of both surfaces."""
-    points, params = _polish_branch(s1, s2, params)
-    data = jnp.concatenate([points, params], axis=1)
+    `polished` by `_polish_branches`: differentiable functions of both surfaces."""
+    data = jnp.concatenate(polished, axis=1)
     degree = min(3, len(data) - 1 - periodic)
     w = jnp.asarray(w, data.dtype)
     if periodic:
@@ -941,28 +1051,17 @@ def surface_intersections(
     _check_surface(s1, "s1")
     _check_surface(s2, "s2")
     if start is not None:
-        return [
-            IntersectionCurve(
-                *_branch_curves(s1, s2, b.params, b.sites, b.periodic),
-                b.closed,
-                b.ends_singular,
-                b.params,
-                b.sites,
-                b.periodic,
-            )
-            for b in start
-        ]
-    found = _search_branches(*(jax.tree.map(_primal, s) for s in (s1, s2)), tol)
+        found = [(b.params, b.sites, b.periodic, b.closed, b.ends_singular) for b in start]
+    else:
+        found = _search_branches(*(jax.tree.map(_primal, s) for s in (s1, s2)), tol)
+    if not found:
+        return []
+    polished = _polish_branches(s1, s2, [params for params, *_ in found])
     return [
         IntersectionCurve(
-            *_branch_curves(s1, s2, params, w, periodic),
-            closed,
-            ends,
-            params,
-            w,
-            periodic,
+            *_branch_curves(s1, s2, points, w, periodic), closed, ends, params, w, periodic
         )
-        for params, w, periodic, closed, ends in found
+        for points, (params, w, periodic, closed, ends) in zip(polished, found, strict=True)
     ]
 
 
@@ -995,12 +1094,19 @@ def _search_branches(s1, s2, tol):
     for x0 in _boundary_starts(s1, s2, search_tol):
         if fresh(x0):
             trace(x0)
-    for centre, reach in _interior_pairs(pair, search_tol):
-        # The crossing of the tangent planes first: near a traced branch, no Newton.
-        rough = pair.point(pair.onto(centre, steps=1))
-        if any(_polyline_gap(rough, line)[0] <= reach for line, _ in traced):
-            continue
-        x0 = pair.onto(centre)
+    centres, points, reach = _interior_pairs(pair, search_tol)
+    # A pair near a traced branch can only find it again: no Newton from there.
+    todo = np.ones(len(centres), dtype=bool)
+    known = 0
+    while True:
+        for line, _ in traced[known:]:
+            left = np.flatnonzero(todo)
+            todo[left] = _polyline_gaps(points[left], line)[0] > reach[left]
+        known = len(traced)
+        if not todo.any():
+            return branches
+        k = int(np.argmax(todo))
+        todo[k] = False
+        x0 = pair.onto(centres[k])
         if x0 is not None and fresh(x0):
             trace(x0)
-    return branches

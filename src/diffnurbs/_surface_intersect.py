@@ -40,7 +40,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.interpolate import BSpline
+from scipy.interpolate import BSpline, make_interp_spline
 
 from ._curve import NURBSCurve
 from ._interpolate import interpolate
@@ -840,9 +840,16 @@ def _fit(pair, params, periodic):
         degree = min(3, len(data) - 1 - periodic)
         if periodic:
             joint = interpolate(data[:-1], degree, w, closed=True)
+            trial = BSpline(np.asarray(joint.knots), np.asarray(joint.control_points), degree)
         else:
-            joint = interpolate(data, degree, w)
-        knots, points = np.asarray(joint.knots), np.asarray(joint.control_points)
+            # The open interpolant `interpolate` builds (knots by averaging, NURBS Book eq.
+            # 9.8, as `averaged_knots`), in NumPy and scipy: nothing compiles per count.
+            windows = [w[i : len(w) - degree + 1 + i] for i in range(degree)]
+            interior = np.mean(windows, axis=0)[1:-1]
+            knots = np.concatenate(
+                [np.full(degree + 1, w[0]), interior, np.full(degree + 1, w[-1])]
+            )
+            trial = make_interp_spline(w, data, degree, knots)
         fitted = params, w
         # Checked at a quarter, the middle and three quarters of each interval: where the
         # parameter path crosses a knot of a surface (a jump in its second derivative)
@@ -851,7 +858,7 @@ def _fit(pair, params, periodic):
         checked = w[:-1, None] + fractions * np.diff(w)[:, None]
         # scipy evaluates the trial fits: their point counts change every round, and the
         # library's jitted evaluation would compile once per count (the result is a NURBSCurve).
-        values = BSpline(knots, points, degree)(checked.ravel())
+        values = trial(checked.ravel())
         on = np.clip(values[:, 3:], pair.lower, pair.upper)
         errors = [
             max(

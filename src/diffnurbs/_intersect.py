@@ -188,7 +188,7 @@ def search(c1, c2, tol: float):
     return _merged(found, overlaps, c1, c2, tol)
 
 
-def _contacts(overlaps, c1, c2, tol):
+def _contacts(overlaps, c1, c2, tops1, tops2, tol):
     """Split joined overlap intervals into true overlaps and tangential contacts.
 
     Near a tangential contact the curves stay within `tol` of each other over a short
@@ -200,7 +200,6 @@ def _contacts(overlaps, c1, c2, tol):
     """
     if not overlaps:
         return [], []
-    tops1, tops2 = pieces(c1), pieces(c2)
 
     def gap(u):  # distance from C1(u) to C2, on the Bezier pieces (NumPy: nothing compiles)
         return min(_distance_to(_point_at(tops1, u), q) for q in tops2)
@@ -234,7 +233,8 @@ def _contact(c1, c2, u, v, tol):
 def _merged(found, overlaps, c1, c2, tol):
     """Starts that reached one point counted once; points inside an overlap dropped; the
     overlap intervals joined where they touch; tangential contacts taken out of them."""
-    overlaps, contacts = _contacts(_join(sorted(overlaps)), c1, c2, tol)
+    tops1, tops2 = pieces(c1), pieces(c2)
+    overlaps, contacts = _contacts(_join(sorted(overlaps)), c1, c2, tops1, tops2, tol)
     found = found + contacts
     points, result = [], []
     for u, v in sorted(found):
@@ -254,15 +254,14 @@ def _merged(found, overlaps, c1, c2, tol):
             continue
         points.append(x)
         result.append((u, v))
-    return (*_contacts_merged(result, c1, c2, tol), overlaps)
+    return (*_contacts_merged(result, c1, c2, tops1, tops2, tol), overlaps)
 
 
-def _contacts_merged(found, c1, c2, tol):
+def _contacts_merged(found, c1, c2, tops1, tops2, tol):
     """`(u1, u2)`: the points `found` (sorted along `c1`), each run of them between which
     the curves stay within `tol` of each other replaced by its one contact point. Starts
     near a tangential contact converge only linearly, so in general (not axis-aligned data)
     they stop at many points about `sqrt(tol)` apart along it."""
-    tops1, tops2 = pieces(c1), pieces(c2)
     runs = []
     for u, v in found:
         if runs:

@@ -93,23 +93,16 @@ class _Patch:
     def __init__(self, h, u, v, rational):
         self.h, self.u, self.v, self.rational = h, u, v, rational
         points = h[..., :-1] / h[..., -1:] if rational else h
-        self.low = points.min(axis=(0, 1))
-        self.high = points.max(axis=(0, 1))
-        self.size = float(np.linalg.norm(self.high - self.low))
         self.corners = points[0, 0], points[-1, 0], points[-1, -1], points[0, -1]
         # Flat: every control point near the bilinear patch of the corners (at its Greville
         # site); then the patch is within that distance of the two corner triangles.
-        a = np.linspace(0, 1, h.shape[0])[:, None, None]
-        b = np.linspace(0, 1, h.shape[1])[None, :, None]
-        p00, p10, p11, p01 = self.corners
-        bilinear = (1 - a) * (1 - b) * p00 + a * (1 - b) * p10 + a * b * p11 + (1 - a) * b * p01
-        self.deviation = float(np.linalg.norm(points - bilinear, axis=-1).max())
-        self.along_u = np.linalg.norm(p10 - p00) + np.linalg.norm(p11 - p01)
-        self.along_v = np.linalg.norm(p01 - p00) + np.linalg.norm(p11 - p10)
+        low, high, size, deviation, along_u = _shapes(h[None], rational)
+        self.low, self.high, self.size = low[0], high[0], float(size[0])
+        self.deviation, self.along_u = float(deviation[0]), bool(along_u[0])
 
     def halves(self):
         """The two halves across the longer direction."""
-        if self.along_u >= self.along_v:
+        if self.along_u:
             (a, b), middle = self.u, 0.5 * sum(self.u)
             left, right = halve(self.h)
             return (
@@ -669,8 +662,9 @@ def _stacked(net):
 
 def _shapes(h, rational):
     """`(low, high, size, deviation, along_u)` of a stack of patch nets `h` `(N, n + 1,
-    m + 1, dim + 1)`, as `_Patch` computes them one at a time (`along_u`: whether the patch
-    is longer in `u`, the direction it is halved in)."""
+    m + 1, dim + 1)` (`deviation`: the largest distance of a control point from the
+    bilinear patch of the corners; `along_u`: whether the patch is longer in `u`, the
+    direction it is halved in)."""
     points = h[..., :-1] / h[..., -1:] if rational else h
     low, high = points.min(axis=(1, 2)), points.max(axis=(1, 2))
     a = np.linspace(0, 1, h.shape[1])[None, :, None, None]

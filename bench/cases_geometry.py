@@ -23,7 +23,6 @@ from scipy import integrate, interpolate, optimize
 
 import diffnurbs as dn
 from diffnurbs import io
-from diffnurbs._cad import occ_geometry
 
 SIDE = 1000  # revolve: SIDE x SIDE points
 SWEEP_SIDE = 500
@@ -171,7 +170,7 @@ def equal_arc_case(rng: np.random.Generator) -> Case:
         return [optimize.brentq(lambda u, s=s: length(u) - s, 0.0, 1.0, xtol=1e-14)
                 if s > 0 else 0.0 for s in targets]  # fmt: skip
 
-    occ_curve = GeomAdaptor.GeomAdaptor_Curve(occ_geometry(curve))
+    occ_curve = GeomAdaptor.GeomAdaptor_Curve(dn.io.to_occ(curve))
     occ_reference = np.asarray(jax.jit(lambda c: c.equal_arc_parameters(OCC_ARC))(curve))
 
     def occ_equal():
@@ -195,7 +194,7 @@ def equal_arc_case(rng: np.random.Generator) -> Case:
 def _plane_curve(curve: dn.NURBSCurve):
     """A planar curve as OpenCascade's `Geom2d_BSplineCurve` (exact: same poles and knots)."""
     plane = gp.gp_Pln(gp.gp_Pnt(0.0, 0.0, 0.0), gp.gp_Dir(0.0, 0.0, 1.0))
-    return GeomAPI.GeomAPI.To2d_s(occ_geometry(curve), plane)
+    return GeomAPI.GeomAPI.To2d_s(dn.io.to_occ(curve), plane)
 
 
 def _nearest(points: np.ndarray, candidates: np.ndarray) -> np.ndarray:
@@ -281,7 +280,7 @@ def simplify_case(rng: np.random.Generator) -> Case:
 
     def occ_remove():
         # Geom_BSplineCurve.RemoveKnot(index, multiplicity left, tolerance), in place.
-        spline = occ_geometry(refined)
+        spline = dn.io.to_occ(refined)
         for u in values:
             index = next(i for i in range(1, spline.NbKnots() + 1) if spline.Knot(i) == u)
             spline.RemoveKnot(index, 0, 1e-9)
@@ -338,7 +337,7 @@ def surface_intersection_case(rng: np.random.Generator) -> Case:
     branches = dn.surface_intersections(s1, s2)
     w = np.linspace(0.0, 1.0, 101)
     points = np.concatenate([np.asarray(b.curve(w)) for b in branches])
-    occ_1, occ_2 = occ_geometry(s1), occ_geometry(s2)
+    occ_1, occ_2 = dn.io.to_occ(s1), dn.io.to_occ(s2)
 
     def intersect():
         return [b.curve for b in dn.surface_intersections(s1, s2)]

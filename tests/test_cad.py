@@ -80,3 +80,30 @@ def test_bad_input_is_named(tmp_path):
     line = dn.NURBSCurve(np.eye(4), 1)
     with pytest.raises(ValueError, match="2D or 3D, got dim = 4"):
         dn.io.write_cad(tmp_path / "x.step", line)
+
+
+@pytest.mark.parametrize("shape", [SPACE, PLANAR, SURFACE], ids=["space", "planar", "surface"])
+def test_to_occ_evaluates_as_the_shape(shape):
+    # OpenCascade's own evaluation (D0) of the geometry handed to it.
+    from OCP.gp import gp_Pnt
+
+    geometry = dn.io.to_occ(shape)
+    point = gp_Pnt()
+    if isinstance(shape, dn.NURBSCurve):
+        expected = np.asarray(shape(U))
+        expected = np.pad(expected, ((0, 0), (0, 3 - expected.shape[1])))
+        params = [(u,) for u in U]
+    else:
+        grid = np.linspace(0.0, 1.0, 21)
+        params = [(u, v) for u in grid for v in grid]
+        expected = np.asarray(shape(*np.array(params).T))
+    got = []
+    for args in params:
+        geometry.D0(*args, point)
+        got.append([point.X(), point.Y(), point.Z()])
+    assert np.allclose(got, expected, atol=1e-12)
+
+
+def test_to_occ_rejects_other_objects():
+    with pytest.raises(ValueError, match="NURBSCurve or NURBSSurface"):
+        dn.io.to_occ([SPACE])

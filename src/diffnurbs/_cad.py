@@ -115,10 +115,27 @@ def _array1(kind, values):
     return array
 
 
-def occ_geometry(shape, occ=None):
-    """`shape` as OpenCascade's `Geom_BSplineCurve` or `Geom_BSplineSurface` (poles,
-    weights, knots with multiplicities: nothing approximated). `occ`: `_ocp()`'s modules."""
-    occ = occ or _ocp()
+def to_occ(shape):
+    """A curve or surface as an OpenCascade geometry, to use with OpenCascade's own
+    algorithms (`GeomAPI`, `GeomAdaptor`, ...) through `cadquery-ocp`.
+
+    Poles, weights and knots (with their multiplicities) are copied: nothing is
+    approximated. Curves are put in space (2D curves get `z = 0`).
+
+    **Arguments:**
+
+    - `shape`: a `NURBSCurve` or `NURBSSurface`.
+
+    **Returns:**
+
+    An `OCP.Geom.Geom_BSplineCurve` or `OCP.Geom.Geom_BSplineSurface`.
+    """
+    if not isinstance(shape, NURBSCurve | NURBSSurface):
+        raise ValueError(f"expected a NURBSCurve or NURBSSurface, got {type(shape).__name__}")
+    return _occ_geometry(shape, _ocp())
+
+
+def _occ_geometry(shape, occ):
     c, gp, geom = occ.collections, occ.gp, occ.Geom
     points, weights = _parts(shape)
     if isinstance(shape, NURBSCurve):
@@ -149,7 +166,7 @@ def occ_geometry(shape, occ=None):
 
 def _to_occ(shape, occ):
     """`shape` as an OpenCascade edge or face (what a STEP file holds)."""
-    geometry = occ_geometry(shape, occ)
+    geometry = _occ_geometry(shape, occ)
     if isinstance(shape, NURBSCurve):
         return occ.BRepBuilderAPI.BRepBuilderAPI_MakeEdge(geometry).Edge()
     return occ.BRepBuilderAPI.BRepBuilderAPI_MakeFace(geometry, 1e-7).Face()

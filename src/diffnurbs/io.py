@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._cad import read_cad as read_cad, write_cad as write_cad
+from ._cad import read_cad as read_cad, to_occ as to_occ, write_cad as write_cad
 from ._halfedge import merge_labels
 from ._sampling import even_grid, import_pyvista
 from ._surface import AbstractSurface, NURBSSurface

@@ -21,6 +21,7 @@ import cases_fit  # noqa: E402
 import cases_geometry  # noqa: E402
 import cases_inversion  # noqa: E402
 import cases_ph  # noqa: E402
+import cases_smooth  # noqa: E402
 import numpy as np  # noqa: E402
 from cases import LIBRARIES, Case, Impl, all_cases, discrepancy  # noqa: E402
 from timing import best_times  # noqa: E402
@@ -43,7 +44,7 @@ SIZES = {
     "geomdl_surface": 1000,
 }
 # Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-18).
-TOPIC_CASES = (cases_geometry, cases_ph, cases_fit, cases_inversion)
+TOPIC_CASES = (cases_geometry, cases_ph, cases_fit, cases_smooth, cases_inversion)
 RESULTS = Path(__file__).parent / "results" / "latest.md"
 
 

@@ -85,6 +85,7 @@ from ._rational import (
 )
 from ._shapes import arc as arc, circle as circle, ellipse as ellipse
 from ._skinning import gordon as gordon, loft as loft
+from ._smooth import SmoothingReport as SmoothingReport, smooth as smooth
 from ._surface import AbstractSurface as AbstractSurface, NURBSSurface as NURBSSurface
 from ._surface_intersect import (
     IntersectionCurve as IntersectionCurve,

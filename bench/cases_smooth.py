@@ -1,0 +1,75 @@
+"""Benchmark cases for smoothing splines: `smooth` of 10^5 noisy samples of y(x) against
+scipy's `make_smoothing_spline`, which solves the same problem (knots at every abscissa,
+the integral of y''^2 as penalty) with the same `lam`, and with `lam` chosen by GCV.
+
+Both curves are evaluated at common abscissae, so the discrepancy compares the fits.
+"""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from cases import Case, Impl
+from scipy.interpolate import make_smoothing_spline
+
+import diffnurbs as dn
+
+POINTS = 100_000
+GCV_POINTS = 10_000  # scipy's GCV fails at 10^5 ("the problem is ill-posed": its search
+# over lam in [0, m] meets matrices that are not numerically positive definite)
+LAM = 1e-4
+
+
+def _ready(x):
+    return jax.block_until_ready(x)
+
+
+def _data(rng: np.random.Generator, count: int) -> tuple[np.ndarray, np.ndarray]:
+    # Samples about evenly spaced (jittered by up to a third of the spacing): random
+    # abscissae 1e-9 apart would make the penalty, ~ 1 / spacing^3, swamp float64 in both.
+    x = np.linspace(0.0, 10.0, count) + rng.uniform(-1, 1, count) * 10 / count / 3
+    return x, np.sin(x) * np.exp(-x / 5) + 0.05 * rng.standard_normal(count)
+
+
+def _case(name: str, x: np.ndarray, y: np.ndarray, lam: float | None, at) -> Case:
+    if lam is None:  # GCV: lam is chosen on concrete data, outside jit
+
+        def build():
+            return dn.smooth(y_jax, x=x_jax)
+    else:
+        jitted = jax.jit(lambda y, x: dn.smooth(y, x=x, penalty=lam))
+
+        def build():
+            return jitted(y_jax, x_jax)
+
+    x_jax, y_jax = jnp.asarray(x), jnp.asarray(y)
+    reference = np.asarray(build()(at))[:, 0]
+    return Case(
+        name,
+        {
+            "diffnurbs": Impl(
+                lambda: _ready(build()), len(x), reference, lambda c: np.asarray(c(at))[:, 0]
+            ),
+            "scipy": Impl(
+                lambda: make_smoothing_spline(x, y, lam=lam),
+                len(x),
+                reference,
+                lambda s: s(np.asarray(at)),
+            ),
+            "splipy": "no smoothing splines",
+            "geomdl": "no smoothing splines",
+        },
+        {},
+        # GCV: both stop Brent's method at their own tolerances on lam
+        tolerance=1e-6 if lam else 1e-4,
+    )
+
+
+def cases(rng: np.random.Generator) -> list[Case]:
+    result = []
+    for count, lam in ((POINTS, LAM), (GCV_POINTS, None)):
+        x, y = _data(rng, count)
+        at = jnp.asarray(np.sort(rng.uniform(x[0], x[-1], 2000)))
+        how = f"lam = {lam:g}" if lam else "lam by GCV"
+        name = f"smooth: cubic smoothing spline of {count:.0e} noisy y(x), {how}"
+        result.append(_case(name, x, y, lam, at))
+    return result

@@ -18,6 +18,7 @@ from importlib.metadata import version  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import cases_fit  # noqa: E402
+import cases_fit_surface  # noqa: E402
 import cases_geometry  # noqa: E402
 import cases_inversion  # noqa: E402
 import cases_ph  # noqa: E402
@@ -44,7 +45,14 @@ SIZES = {
     "geomdl_surface": 1000,
 }
 # Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-18).
-TOPIC_CASES = (cases_geometry, cases_ph, cases_fit, cases_smooth, cases_inversion)
+TOPIC_CASES = (
+    cases_geometry,
+    cases_ph,
+    cases_fit,
+    cases_smooth,
+    cases_fit_surface,
+    cases_inversion,
+)
 RESULTS = Path(__file__).parent / "results" / "latest.md"
 
 

@@ -58,6 +58,7 @@ from ._deboor import de_boor_levels as de_boor_levels
 from ._ffd import deform_image as deform_image, ffd as ffd, ffd_lattice as ffd_lattice
 from ._fit_curve import CurveFitReport as CurveFitReport, fit_curve as fit_curve
 from ._fit_function import FunctionFitReport as FunctionFitReport, fit_function as fit_function
+from ._fit_surface import SurfaceFitReport as SurfaceFitReport, fit_surface as fit_surface
 from ._frames import KinematicSweep as KinematicSweep, frames as frames
 from ._halfedge import HalfEdgeMesh as HalfEdgeMesh, weld_vertices as weld_vertices
 from ._interpolate import (

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from helpers import central_difference
 from scipy.interpolate import make_interp_spline, make_smoothing_spline
 
 import diffnurbs as dn
@@ -228,16 +229,6 @@ def test_float32():
     assert np.isfinite(report.gcv) and 4 < report.dof < 20
 
 
-def _central(f, x, h=1e-6):
-    x = np.asarray(x, float)
-    grad = np.zeros_like(x)
-    for i in np.ndindex(x.shape):
-        e = np.zeros_like(x)
-        e[i] = h
-        grad[i] = (f(x + e) - f(x - e)) / (2 * h)
-    return grad
-
-
 @pytest.mark.parametrize("closed", [False, True])
 def test_gradients_match_finite_differences(closed):
     rng = np.random.default_rng(12)
@@ -262,7 +253,7 @@ def test_gradients_match_finite_differences(closed):
         def f(v, k=k):
             return float(compiled(*[v if j == k else a for j, a in enumerate(args)]))
 
-        assert np.allclose(g, _central(f, args[k]), rtol=1e-5, atol=1e-6), k
+        assert np.allclose(g, central_difference(f, args[k]), rtol=1e-5, atol=1e-6), k
 
 
 def test_bad_input():

@@ -143,17 +143,19 @@ def _rms(curve, u, points) -> float:
 
 
 def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
-    """fit_curve of a noisy rational curve, with fixed centripetal parameters (parameter
-    correction makes the Jacobian dense in the m parameters: O(m^3) per step, too slow for
-    10^3 points). Non-rational, it is plain least squares: scipy's make_lsq_spline with the
-    same parameters and knots solves the same problem. Nothing else fits weights."""
+    """fit_curve of a noisy rational curve, with fixed centripetal parameters. Non-rational,
+    it is plain least squares: scipy's make_lsq_spline with the same parameters and knots
+    solves the same problem. Nothing else fits weights (the rational row's parameters are
+    held with `correct_parameters=False`; `correction_cases` times the correction)."""
     points = jnp.asarray(_noisy_rational_curve(rng))
     host = np.asarray(points)
     u = np.asarray(dn.parametrize(points))
     at = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, 2000)))
     result = []
     for rational in (False, True):
-        curve, report = dn.fit_curve(points, FIT_CONTROL, 3, rational=rational, full_output=True)
+        curve, report = dn.fit_curve(
+            points, FIT_CONTROL, 3, rational=rational, correct_parameters=False, full_output=True
+        )
         name = (
             f"{15 + rational}. fit_curve, {FIT_POINTS} noisy points of a rational cubic, "
             f"{FIT_CONTROL} control points, {'rational' if rational else 'non-rational'}: "
@@ -177,7 +179,9 @@ def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
                 {
                     "diffnurbs": Impl(
                         lambda rational=rational: _ready(
-                            dn.fit_curve(points, FIT_CONTROL, 3, rational=rational)
+                            dn.fit_curve(
+                                points, FIT_CONTROL, 3, rational=rational, correct_parameters=False
+                            )
                         ),
                         FIT_POINTS,
                         np.asarray(curve(at)),
@@ -193,10 +197,81 @@ def fit_curve_cases(rng: np.random.Generator) -> list[Case]:
     return result
 
 
+CORRECTION_POINTS = (1000, 10_000)
+
+
+def _correction_data(rng: np.random.Generator, kind: str, count: int):
+    """`(points, n_control, degree, rational, truth)`: a quarter circle at random angles
+    (truth: the radius) or a random cubic B-spline with noise 1e-3 at random parameters,
+    fitted with its own knots (truth: the curve)."""
+    if kind == "circle":
+        angle = np.sort(np.r_[0.0, np.pi / 2, rng.uniform(0.0, np.pi / 2, count - 2)])
+        return np.column_stack([np.cos(angle), np.sin(angle)]), 3, 2, True, None
+    knots = clamped_random_knots(rng, FIT_CONTROL, 3)
+    truth = dn.NURBSCurve(rng.uniform(-1.0, 1.0, (FIT_CONTROL, 3)), 3, knots)
+    samples = np.asarray(truth(parameters(rng, count, ordered=True)))
+    return samples + 1e-3 * rng.standard_normal(samples.shape), FIT_CONTROL, 3, False, truth
+
+
+def correction_cases(rng: np.random.Generator) -> list[Case]:
+    """fit_curve with parameter correction, 10^3 and 10^4 points: a step eliminates the m
+    parameters point by point (O(m)). No library here corrects parameters (scipy,
+    splipy and geomdl fit on fixed parameters), so the rows have no peer; each reports
+    its steps and how well the known answer is met."""
+    result = []
+    for kind in ("circle", "noisy cubic"):
+        for count in CORRECTION_POINTS:
+            points, n_control, degree, rational, truth = _correction_data(rng, kind, count)
+            knots = None if truth is None else np.asarray(truth.knots)
+
+            def fit(
+                points=points, n_control=n_control, degree=degree, rational=rational, knots=knots
+            ):
+                return dn.fit_curve(
+                    points,
+                    n_control,
+                    degree,
+                    rational=rational,
+                    correct_parameters=True,
+                    knots=knots,
+                    full_output=True,
+                )
+
+            curve, report = fit()
+            at = np.linspace(0.0, 1.0, 2001)
+            if truth is None:
+                quality = np.abs(np.linalg.norm(np.asarray(curve(at)), axis=1) - 1).max()
+                what = f"radius error {quality:.1e}"
+                title = "rational quadratic, quarter circle at random angles"
+            else:
+                quality = np.abs(np.asarray(curve(at)) - np.asarray(truth(at))).max()
+                what = f"rms residual {float(report.rms_residual):.2e}, off the truth {quality:.1e}"
+                title = f"cubic, random B-spline + noise 1e-3, {n_control} control points"
+            result.append(
+                Case(
+                    f"{17 + len(result)}. fit_curve with parameter correction, {count:.0e} "
+                    f"points, {title}: {int(report.steps)} steps, {what}",
+                    {
+                        "diffnurbs": Impl(
+                            lambda fit=fit: _ready(fit()[0].control_points),
+                            count,
+                            np.asarray(curve.control_points),
+                        ),
+                        "scipy": "no parameter correction",
+                        "splipy": "no parameter correction",
+                        "geomdl": "no parameter correction",
+                    },
+                    {},
+                )
+            )
+    return result
+
+
 def cases(rng: np.random.Generator) -> list[Case]:
     return [
         interpolation_case(rng),
         least_squares_case(rng),
         fit_function_case(),
         *fit_curve_cases(rng),
+        *correction_cases(rng),
     ]

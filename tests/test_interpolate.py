@@ -230,6 +230,111 @@ def test_closed_interpolation_of_circle_points_is_close_to_the_circle():
     assert np.abs(radius - 1).max() < 1e-5
 
 
+def wrapped_basis(knots, degree, u, n_control):
+    """The basis matrix of a closed curve's `n_control` free control points: the columns
+    of control points `n .. n+p-1` (the first `p` again) added to those of `0 .. p-1`."""
+    matrix = np.asarray(dn.basis_matrix(jnp.asarray(knots), degree, jnp.asarray(u)))
+    wrapped = matrix[:, :n_control].copy()
+    wrapped[:, :degree] += matrix[:, n_control:]
+    return wrapped
+
+
+@pytest.mark.parametrize(
+    ("degree", "n_control", "weighted"),
+    [
+        (1, 2, False),
+        (2, 3, False),
+        (2, 8, True),
+        (3, 4, True),
+        (3, 11, False),
+        (4, 9, True),
+        (5, 14, False),
+    ],
+)
+def test_closed_least_squares_equals_a_dense_lstsq_of_the_wrapped_basis(
+    rng, degree, n_control, weighted
+):
+    points = wiggly_points(rng, m=23, dim=3) + rng.normal(scale=0.3, size=(23, 3))
+    weights = rng.uniform(0.0, 2.0, 23) if weighted else None
+    curve = dn.approximate(points, n_control, degree, "chord", weights, closed=True)
+    u = numpy_parameters(np.concatenate([points, points[:1]]), "chord")
+    matrix = wrapped_basis(curve.knots, degree, u[:-1], n_control)
+    root = np.sqrt(np.ones(23) if weights is None else weights)[:, None]
+    expected = np.linalg.lstsq(root * matrix, root * points, rcond=None)[0]
+    np.testing.assert_allclose(curve.control_points[:n_control], expected, atol=1e-11)
+    np.testing.assert_allclose(curve.control_points[n_control:], expected[:degree])
+    assert curve.knots.shape == (n_control + 2 * degree + 1,)
+    # One period of knots from u_0 to u_m, the rest continuing it.
+    period = np.asarray(curve.knots)
+    np.testing.assert_allclose(period[[degree, n_control + degree]], [0.0, 1.0])
+    np.testing.assert_allclose(period[n_control:] - period[:-n_control], 1.0, atol=1e-14)
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 4])
+def test_every_closed_approximation_span_holds_a_parameter(rng, degree):
+    for m, n_control in [(9, 9), (20, 7), (31, 30), (50, 6)]:
+        u = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 1.0, m - 1)), [1.0]])
+        knots = np.asarray(
+            dn.approximate(rng.normal(size=(m, 2)), n_control, degree, u, closed=True).knots
+        )
+        spans = knots[degree : n_control + degree + 1]
+        counts = np.histogram(u[:-1], bins=spans)[0]
+        assert np.all(counts >= 1), (m, n_control, counts)
+
+
+@pytest.mark.parametrize("degree", [1, 2, 3, 4, 5])
+def test_closed_least_squares_with_a_point_per_control_point_interpolates(rng, degree):
+    points = wiggly_points(rng, m=12, dim=3)
+    fit = dn.approximate(points, 12, degree, closed=True)
+    interpolant = dn.interpolate(points, degree, closed=True)
+    np.testing.assert_array_equal(fit.knots, interpolant.knots)
+    np.testing.assert_allclose(fit.control_points, interpolant.control_points, atol=1e-12)
+
+
+@pytest.mark.parametrize("degree", [2, 3])
+def test_closed_least_squares_recovers_a_periodic_spline_from_its_samples(rng, degree):
+    n_control = 7
+    steps = rng.uniform(0.5, 1.5, n_control)
+    u = np.concatenate([[0.0], np.cumsum(steps) / steps.sum()])
+    knots = np.asarray(dn.periodic_knots(u, degree))
+    control = rng.normal(size=(n_control, 3))
+    truth = dn.NURBSCurve(np.concatenate([control, control[:degree]]), degree, knots)
+    t = np.concatenate([[0.0], np.sort(rng.uniform(0.0, 1.0, 40)), [1.0]])
+    curve = dn.approximate(truth(t[:-1]), n_control, degree, t, knots=knots, closed=True)
+    np.testing.assert_allclose(curve.control_points[:n_control], control, atol=1e-12)
+    check = jnp.linspace(0.0, 1.0, 501)
+    np.testing.assert_allclose(curve(check), truth(check), atol=1e-12)
+
+
+@pytest.mark.parametrize("degree", [2, 3, 4, 5])
+def test_closed_least_squares_joins_with_c_p_minus_1_continuity(rng, degree):
+    points = wiggly_points(rng, m=30) + rng.normal(scale=0.2, size=(30, 2))
+    curve = dn.approximate(points, 10, degree, closed=True)
+    # Derivatives at the domain's start come from the first span (the right side of the
+    # seam), those at its end from the last span (the left side).
+    ders = np.asarray(curve.derivatives(jnp.asarray([0.0, 1.0]), degree))
+    scale = np.abs(ders).max(axis=(0, 2))[:, None]
+    np.testing.assert_allclose(
+        ders[0, :degree] / scale[:degree], ders[1, :degree] / scale[:degree], atol=1e-11
+    )
+    # The p-th derivative jumps: the two sides are evaluated on different spans.
+    assert np.abs(ders[0, degree] - ders[1, degree]).max() > 1e-3 * scale[degree, 0]
+
+
+def test_closed_least_squares_gradient_matches_finite_differences(rng):
+    points = jnp.asarray(wiggly_points(rng, m=15))
+    at = jnp.linspace(0.0, 1.0, 11)
+
+    def loss(q):
+        return jnp.sum(jnp.sin(dn.approximate(q, 6, 3, closed=True)(at)))
+
+    grad = np.asarray(jax.grad(loss)(points))
+    h = 1e-6
+    for k, d in [(0, 0), (7, 1), (14, 0)]:
+        central = (loss(points.at[k, d].add(h)) - loss(points.at[k, d].add(-h))) / (2 * h)
+        np.testing.assert_allclose(grad[k, d], central, rtol=1e-6)
+
+
 # ---------------------------------------------------------------------------------------------
 # Least squares
 
@@ -507,6 +612,25 @@ def test_surface_least_squares_equals_geomdl(rng):
                 q, 6, 1, jnp.linspace(0, 1, 10), knots=jnp.r_[0, 0, 0.01, 0.02, 0.03, 0.05, 1, 1]
             ),
             "singular",
+        ),
+        (lambda q: dn.approximate(q, 11, 3, closed=True), r"at most 10 control points"),
+        (lambda q: dn.approximate(q, 3, 3, closed=True), r"at least p \+ 1 = 4 control points"),
+        (
+            lambda q: dn.approximate(q.at[2, 0].set(jnp.nan), 5, closed=True),
+            "points must be finite",
+        ),
+        (lambda q: dn.approximate(q.at[-1].set(q[0]), 5, closed=True), "without repeating"),
+        (lambda q: dn.approximate(q, 5, closed=True, interpolate_ends=True), "open curves only"),
+        (lambda q: dn.approximate(q, 5, 3, jnp.linspace(0, 1, 10), closed=True), "11 parameters"),
+        (
+            lambda q: dn.approximate(q, 5, 2, knots=jnp.linspace(-0.4, 1.4, 11), closed=True),
+            r"needs n_control \+ 2 p \+ 1 = 10 periodic knots",
+        ),
+        (
+            lambda q: dn.approximate(
+                q, 5, 2, knots=jnp.r_[-0.3, -0.2, 0, 0.2, 0.4, 0.6, 0.8, 1, 1.2, 1.3], closed=True
+            ),
+            "must repeat with the period",
         ),
     ],
 )

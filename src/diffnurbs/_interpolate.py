@@ -229,46 +229,183 @@ def approximate(
     parametrization="centripetal",
     weights: ArrayLike | None = None,
     *,
-    interpolate_ends: bool = True,
+    interpolate_ends: bool | None = None,
     knots: ArrayLike | None = None,
+    closed: bool = False,
 ) -> NURBSCurve:
     """Least-squares B-spline curve of `n_control` control points through the end points
-    (NURBS Book A9.7), optionally weighted.
+    (NURBS Book A9.7), or closed, optionally weighted.
 
     The knots follow eq. 9.68-9.69 (every span holds data), unless given. Solving the
     banded normal equations costs O(m p^2).
 
+    A closed curve (`closed=True`) is a periodic spline held as `interpolate(...,
+    closed=True)` holds it: `n_control` free control points with the first `degree`
+    repeated at the end, and `n_control + 2 degree + 1` knots continuing periodically, so
+    it closes with `C^(p-1)` continuity. The data is not repeated: the parameters also
+    step back from the last point to the first (`parametrize(..., closed=True)`). One
+    period's knots are the parameters interpolated at the positions `j m / n_control`
+    (`j - 1/2` positions for even degrees, as `periodic_knots` places them), so every span
+    holds data and `n_control = m` gives the closed interpolant. The normal equations
+    are then cyclic banded; numbering the control points 0, n-1, 1, n-2, ... turns them
+    into a plain banded system (half-bandwidth at most `2 p`) that is still symmetric
+    positive definite, so the same pivot-free banded solve applies in O(m p^2), with no
+    dense factorisation and no low-rank correction for the wrap (whose banded part alone
+    need not be invertible).
+
     **Arguments:**
 
     - `points`: array of shape `(m, dim)`.
-    - `n_control`: number of control points, `degree + 1 <= n_control <= m`.
+    - `n_control`: number of control points (free ones when closed),
+      `degree + 1 <= n_control <= m`.
     - `degree`: the degree `p`.
-    - `parametrization`: a method name (see `parametrize`) or `m` increasing parameters.
+    - `parametrization`: a method name (see `parametrize`) or `m` increasing parameters
+      (`m + 1` when closed, the last closing the loop).
     - `weights`: optional `m` non-negative weights of the squared errors.
     - `interpolate_ends`: pass exactly through the first and last points (A9.7); False
-      gives the plain least-squares fit (as scipy's `make_lsq_spline`).
-    - `knots`: optional `n_control + degree + 1` knots; their domain must hold the
-      parameters, and be `[u_0, u_m]` with clamped ends when `interpolate_ends`.
+      gives the plain least-squares fit (as scipy's `make_lsq_spline`). None (default):
+      True for an open curve; a closed one has no ends, and True raises `ValueError`.
+    - `knots`: optional `n_control + degree + 1` knots (`n_control + 2 degree + 1`
+      periodic ones when closed); their domain must hold the parameters, and be
+      `[u_0, u_m]` with clamped ends when `interpolate_ends`.
+    - `closed`: fit a closed (periodic) curve to points given once around the loop.
 
     **Returns:**
 
-    A non-rational `NURBSCurve`. Works on traced points, parameters, weights and knots;
-    `n_control`, `degree`, `interpolate_ends`, a method name and whether `weights` and
-    `knots` are given must be concrete.
+    A non-rational `NURBSCurve` (with `n_control + degree` control points when closed).
+    Works on traced points, parameters, weights and knots; `n_control`, `degree`,
+    `interpolate_ends`, `closed`, a method name and whether `weights` and `knots` are
+    given must be concrete.
     """
     degree = check_degree(degree)
     points = _data_points(points)
     check_control_count(n_control, degree, at_most=points.shape[0])
-    u = _parameters(points, parametrization)
+    interpolate_ends = _ends_option(interpolate_ends, closed)
+    if closed:
+        _check_loop(points)
+    u = _parameters(points, parametrization, closed)
     if knots is None:
-        knots = approximation_knots(u, n_control, degree)
+        knots = (closed_approximation_knots if closed else approximation_knots)(
+            u, n_control, degree
+        )
     else:
-        knots = check_knots(jnp.asarray(knots, dtype=points.dtype), n_control, degree)
+        knots = checked_knots(knots, points.dtype, n_control, degree, closed)
         _check_knots_fit(knots, degree, u, interpolate_ends)
     if weights is not None:
         weights = _point_weights(weights, points.shape[0])
-    control = least_squares(u, points, knots, degree, weights, interpolate_ends)
+    if closed:
+        control = _periodic_least_squares(u[:-1], points, knots, degree, weights)
+    else:
+        control = least_squares(u, points, knots, degree, weights, interpolate_ends)
     return NURBSCurve(check_solved(control), degree, knots)
+
+
+def _ends_option(interpolate_ends: bool | None, closed: bool) -> bool:
+    if interpolate_ends is None:
+        return not closed
+    if closed and interpolate_ends:
+        raise ValueError(
+            "interpolate_ends applies to open curves only (a closed curve has no ends), "
+            "got closed=True with interpolate_ends=True"
+        )
+    return interpolate_ends
+
+
+def _check_loop(points: Array) -> None:
+    values = concrete(points)
+    if values is not None and np.array_equal(values[0], values[-1]):
+        raise ValueError(
+            "closed=True takes the points without repeating the first at the end; "
+            "drop the last point"
+        )
+
+
+def checked_knots(knots: ArrayLike, dtype, n_control: int, degree: int, closed: bool) -> Array:
+    """Given knots as an array of `dtype`, checked: clamped-or-not knots of `n_control`
+    control points, or periodic ones of `n_control` free control points when `closed`."""
+    knots = jnp.asarray(knots, dtype=dtype)
+    if not closed:
+        return check_knots(knots, n_control, degree)
+    expected = n_control + 2 * degree + 1
+    if knots.shape != (expected,):
+        raise ValueError(
+            f"a closed curve with {n_control} free control points of degree {degree} needs "
+            f"n_control + 2 p + 1 = {expected} periodic knots, got shape {knots.shape}"
+        )
+    knots = check_knots(knots, n_control + degree, degree)
+    values = concrete(knots)
+    if values is not None:
+        # Each knot and the one a period later are a period apart (to rounding).
+        period = values[n_control + degree] - values[degree]
+        gaps = values[n_control:] - values[:-n_control]
+        if np.any(np.abs(gaps - period) > np.sqrt(np.finfo(values.dtype).eps) * period):
+            raise ValueError(
+                f"knots of a closed curve must repeat with the period "
+                f"knots[n_control + p] - knots[p] = {period}: expected "
+                f"knots[i + {n_control}] - knots[i] = {period}, got {gaps}"
+            )
+    return knots
+
+
+@functools.partial(jax.jit, static_argnames=("n_control", "degree"))
+def closed_approximation_knots(u: Array, n_control: int, degree: int) -> Array:
+    """Periodic knots of a closed least-squares curve with `n_control` spans, for data at
+    the parameters `u` (`m + 1` of them, the last closing the loop).
+
+    Knot `j` of the period sits at position `j m / n_control` of the parameters (`1/2`
+    earlier for even degrees), linearly interpolated, the first at `u_0` and the last at
+    `u_m`; each span then covers at least one whole parameter step, so it holds a data
+    point. With `n_control = m` these are `periodic_knots(u, degree)`. `degree` knots on
+    each side continue the period.
+    """
+    m = u.shape[0] - 1
+    at = np.arange(1, n_control) * (m / n_control) - (0.5 if degree % 2 == 0 else 0.0)
+    index = np.floor(at).astype(int)
+    alpha = (at - index).astype(u.dtype)
+    period = jnp.concatenate([u[:1], (1 - alpha) * u[index] + alpha * u[index + 1], u[-1:]])
+    steps = jnp.diff(period)
+    wrap = np.arange(degree) % n_control
+    left = period[0] - jnp.cumsum(steps[n_control - 1 - wrap])[::-1]
+    right = period[-1] + jnp.cumsum(steps[wrap])
+    return jnp.concatenate([left, period, right])
+
+
+def band_order(n_control: int, degree: int, closed: bool) -> tuple[np.ndarray, int]:
+    """`(position, half)`: the row of each control point in a banded system coupling the
+    control points of every span, and the half-bandwidth in control points.
+
+    Open curves keep the order (half-bandwidth `p`). A closed curve couples the last
+    control points with the first; the order 0, n-1, 1, n-2, 2, ... puts every cyclic
+    window of `p + 1` control points within `2 p` rows of each other.
+    """
+    index = np.arange(n_control)
+    if not closed:
+        return index, degree
+    position = np.where(index < (n_control + 1) // 2, 2 * index, 2 * (n_control - 1 - index) + 1)
+    windows = position[(index[:, None] + np.arange(degree + 1)) % n_control]
+    return position, int(np.max(windows.max(axis=1) - windows.min(axis=1)))
+
+
+@functools.partial(jax.jit, static_argnames="degree")
+def _periodic_least_squares(
+    u: Array, points: Array, knots: Array, degree: int, weights: Array | None
+) -> Array:
+    """Control points (the first `degree` repeated at the end) of the closed curve
+    minimising `sum_k w_k |C(u_k) - Q_k|^2` for fixed periodic knots."""
+    n_control = knots.shape[0] - 2 * degree - 1
+    position, half = band_order(n_control, degree, closed=True)
+    span, funs = basis_funs(knots, degree, u)
+    weighted = funs if weights is None else funs * weights[:, None]
+    # Control points n .. n+p-1 are 0 .. p-1 again: their rows and columns fold onto those.
+    rows = jnp.asarray(position)[(span[:, None] - degree + jnp.arange(degree + 1)) % n_control]
+    band = jnp.zeros((n_control, 2 * half + 1), funs.dtype)
+    band = band.at[rows[:, :, None], rows[:, None, :] - rows[:, :, None] + half].add(
+        weighted[:, :, None] * funs[:, None, :]
+    )
+    rhs = jnp.zeros((n_control, points.shape[1]), points.dtype)
+    rhs = rhs.at[rows].add(weighted[:, :, None] * points[:, None, :])
+    control = solve_banded(band, rhs)[position]
+    return jnp.concatenate([control, control[:degree]])
 
 
 def _check_knots_fit(knots: Array, degree: int, u: Array, interpolate_ends: bool) -> None:

@@ -161,7 +161,7 @@ def curve_points_case(curve: RationalCurve, u: np.ndarray, m: int, m_splipy: int
             "splipy": Impl(lambda: curve.splipy(u_splipy), m_splipy, ref[:m_splipy]),
             "geomdl": Impl(lambda: curve.geomdl.evaluate_list(u[:m].tolist()), m, ref[:m]),
         },
-        {"scipy": 3, "geomdl": 100},
+        {"scipy": 4, "geomdl": 100},  # issue 15, item 5
     )
 
 
@@ -301,7 +301,7 @@ def scaling_cases(rng: np.random.Generator, sizes: dict) -> list[Case]:
                     "splipy": "not asked",
                     "geomdl": "not asked",
                 },
-                {"scipy": 3},
+                {"scipy": 4},  # issue 15, item 5: at every n, and flat in n (run.py)
                 group="scaling",
             )
         )

@@ -62,7 +62,7 @@ def interpolation_case(rng: np.random.Generator) -> Case:
         f"12. cubic interpolation of {POINTS:.0e} points in 3D (chord, averaged knots)",
         lambda q: dn.interpolate(q, 3, "chord"),
         lambda u, points, knots: make_interp_spline(u, points, k=3, t=knots),
-        {},
+        {"scipy": 1},  # issue 15, item 5
     )
 
 

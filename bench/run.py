@@ -30,7 +30,9 @@ from timing import best_times  # noqa: E402
 SEED = 0
 BUDGET = 3.0  # seconds of timing rounds per case
 TOLERANCE = 1e-9  # largest accepted difference from diffnurbs, relative to the values
-FLATNESS = 0.5  # the slowest size of a scaling group must keep this share of the fastest
+# The slowest size of a scaling group must keep this share of the fastest (issue 15: the cost at
+# n = 10^4 within 1.3x of the cost at n = 10).
+FLATNESS = 1 / 1.3
 SIZES = {
     "curve": 10**6,
     "derivatives": 10**5,
@@ -188,7 +190,7 @@ def main() -> int:
         all_met &= flat
         notes.append(
             f"- {group}: diffnurbs's slowest size runs at {share:.2f} of its fastest "
-            f"(target ≥ {FLATNESS}: {'met' if flat else '**not met**'})."
+            f"(target ≥ {FLATNESS:.2f}: {'met' if flat else '**not met**'})."
         )
     values = dict(SIZES, budget=BUDGET, side=SIZES["grid_side"], tolerance=TOLERANCE)
     notes += [note.format(**values) for note in NOTES]

@@ -206,3 +206,74 @@ def test_basis_matrix_outside_the_domain_under_jit():
     expected = [BSpline(knots, np.eye(5)[i], 2, extrapolate=True)(u) for i in range(5)]
     np.testing.assert_allclose(matrix, np.stack(expected, axis=1), atol=1e-14)
     np.testing.assert_allclose(matrix.sum(axis=1), 1.0, atol=1e-14)
+
+
+def span_by_definition(knots, degree, u):
+    """`find_span`'s docstring as a linear scan: the largest i in [p, n] with knots[i] <= u,
+    counting only knots before the domain's end (the last knot belongs to the last non-empty
+    span); p below the domain and for NaN."""
+    n = len(knots) - degree - 2
+    found = [i for i in range(degree, n + 1) if knots[i] <= u and knots[i] < knots[n + 1]]
+    return max(found, default=degree)
+
+
+def knot_vector_zoo(rng, degree, n_interior):
+    """Knot vectors of one length: random, uniform, repeated (up to p + 1), clustered (half
+    of them within 1e-6), on a grid (ties), clamped or not."""
+    ends = (np.zeros(degree + 1), np.ones(degree + 1))
+    unclamped = (-np.arange(degree + 1, 0, -1) / 10.0, 1 + np.arange(degree + 1) / 10.0)
+    distinct = rng.uniform(0.0, 1.0, n_interior)
+    repeated = np.repeat(distinct, rng.integers(1, degree + 2, n_interior))[:n_interior]
+    cluster = np.concatenate(
+        [0.3 + 1e-6 * rng.uniform(size=n_interior // 2), distinct[n_interior // 2 :]]
+    )
+    grid = rng.integers(1, 8, n_interior) / 8.0
+    uniform = np.linspace(0.0, 1.0, n_interior + 2)[1:-1]
+    for inner in (distinct, repeated, cluster, grid, uniform):
+        for lower, upper in (ends, unclamped):
+            yield np.concatenate([lower, np.sort(inner), upper])
+    # The domain's end repeated inside an unclamped knot vector.
+    inner = np.sort(np.concatenate([distinct[: n_interior - 2], [1.0, 1.0]]))
+    yield np.concatenate([ends[0], inner, unclamped[1]])
+
+
+@pytest.mark.parametrize("degree", [0, 1, 3, 5])
+@pytest.mark.parametrize("ordered", [True, False])
+def test_find_span_equals_the_definition(degree, ordered):
+    # The search against its definition, at every knot (ties), next to every knot, outside the
+    # domain and at random, in order or not.
+    # Traced knots are not checked, so knots repeated more than p + 1 times are searched too.
+    search = jax.jit(dn.find_span, static_argnums=1)
+    rng = np.random.default_rng(degree)
+    n_interior = 40
+    for knots in knot_vector_zoo(rng, degree, n_interior):
+        u = np.concatenate(
+            [
+                knots,
+                np.nextafter(knots, -np.inf),
+                np.nextafter(knots, np.inf),
+                [-np.inf, -5.0, 5.0, np.inf],
+                rng.uniform(knots[0] - 0.1, knots[-1] + 0.1, 300),
+            ]
+        )
+        u = np.sort(u) if ordered else rng.permutation(u)
+        expected = [span_by_definition(knots, degree, x) for x in u]
+        np.testing.assert_array_equal(search(knots, degree, u), expected)
+        np.testing.assert_array_equal(
+            search(knots, degree, u.astype(np.float32)),
+            [span_by_definition(knots, degree, x) for x in u.astype(np.float32)],
+        )
+
+
+def test_find_span_under_vmap_over_knots_and_parameters():
+    rng = np.random.default_rng(7)
+    knots = jnp.asarray(np.stack([random_knots(rng, 50, 3) for _ in range(4)]))
+    knots = knots.at[1, 20:28].set(knots[1, 20])  # a knot repeated beyond p + 1 (unchecked)
+    u = jnp.asarray(np.sort(rng.uniform(0.0, 1.0, (4, 200)), axis=1))
+    both = jax.vmap(lambda k, x: dn.find_span(k, 3, x))(knots, u)
+    only_u = jax.vmap(lambda x: dn.find_span(knots[0], 3, x))(u)
+    for i in range(4):
+        expected = [span_by_definition(np.asarray(knots[i]), 3, x) for x in np.asarray(u[i])]
+        np.testing.assert_array_equal(both[i], expected)
+        expected = [span_by_definition(np.asarray(knots[0]), 3, x) for x in np.asarray(u[i])]
+        np.testing.assert_array_equal(only_u[i], expected)

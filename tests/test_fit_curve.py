@@ -322,9 +322,13 @@ def test_gradient_of_a_closed_rational_fit_with_parameter_correction(rng):
 
     grad = np.asarray(jax.grad(loss)(points))
     assert np.all(np.isfinite(grad))
-    # Forward mode (the implicit JVP) and reverse mode (its transpose) agree.
+    # Forward mode (the implicit JVP) and reverse mode (its transpose) agree, at one optimum:
+    # separate runs stop within ~1e-9 of each other along the flattest direction.
+    _, jvp = jax.linearize(loss, points)
+    (vjp,) = jax.linear_transpose(jvp, points)(1.0)
     tangent = jnp.zeros_like(points).at[3, 1].set(1.0)
-    np.testing.assert_allclose(jax.jvp(loss, (points,), (tangent,))[1], grad[3, 1], rtol=1e-9)
+    np.testing.assert_allclose(jvp(tangent), vjp[3, 1], rtol=1e-12)
+    np.testing.assert_allclose(vjp, grad, rtol=1e-7, atol=1e-9)
     # The optimum is found to about 1e-9 along its flattest direction (the loss can no
     # longer tell better from worse there), so the step stays large: solver error / h
     # ~1e-6 of the derivative, fourth-order truncation less.

@@ -46,7 +46,7 @@ from ._interpolate import (
     checked_knots,
 )
 from ._misc import safe_norm
-from ._validate import check_control_count, check_degree, concrete
+from ._validate import check_control_count, check_degree, check_solver_options, concrete
 
 _POLISH_STEPS = 4  # Gauss-Newton steps after Levenberg-Marquardt (see `_levenberg_marquardt`)
 _ROUNDING_SLACK = 64  # ulps of the sum of squares a final step may add
@@ -81,12 +81,7 @@ def _check_options(rational, correct_parameters, closed, max_steps, tol) -> bool
         raise ValueError(
             f"correct_parameters must be True, False or None, got {correct_parameters!r}"
         )
-    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)):
-        raise ValueError(f"max_steps must be a Python int, got {max_steps!r}")
-    if max_steps <= 0:
-        raise ValueError(f"max_steps must be positive, got {max_steps}")
-    if tol is not None and not (np.ndim(tol) == 0 and np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a finite number > 0, got {tol!r}")
+    check_solver_options(max_steps, tol)
     return rational if correct_parameters is None else correct_parameters
 
 
@@ -204,15 +199,20 @@ def fit_curve(
     curve = NURBSCurve(control, degree, start.knots, weights)
     if not full_output:
         return curve
-    distances = safe_norm(curve(u) - points)
-    report = CurveFitReport(
+    return curve, fit_report(CurveFitReport, curve(u) - points, steps, u, converged)
+
+
+def fit_report(kind, errors: Array, steps: Array, parameters: Array, converged: Array):
+    """A `CurveFitReport` or `SurfaceFitReport` (`kind`) from the vectors `errors` from
+    the data points to the fitted shape at their parameters."""
+    distances = safe_norm(errors)
+    return kind(
         steps=steps,
         rms_residual=jnp.sqrt(jnp.mean(distances**2)),
         max_residual=jnp.max(distances),
-        parameters=u,
+        parameters=parameters,
         converged=converged,
     )
-    return curve, report
 
 
 def _check_clamped(knots: Array, degree: int) -> None:

@@ -39,16 +39,17 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._basis import basis_funs, ders_basis_funs
+from ._fit_curve import fit_report
 from ._interpolate import _data_points, check_solved
 from ._inversion import _bounds, _minimise, _surface_model
 from ._knots import clamped_knots
-from ._misc import safe_norm
 from ._surface import AbstractSurface, NURBSSurface
 from ._validate import (
     check_control_count,
     check_degree,
     check_degree_pair,
     check_pair,
+    check_solver_options,
     concrete,
 )
 
@@ -181,15 +182,8 @@ def fit_surface(
     surface = NURBSSurface(check_solved(control), degrees)
     if not full_output:
         return surface
-    distances = safe_norm(surface._points(uv[:, 0], uv[:, 1]) - points)
-    report = SurfaceFitReport(
-        steps=steps,
-        rms_residual=jnp.sqrt(jnp.mean(distances**2)),
-        max_residual=jnp.max(distances),
-        parameters=uv,
-        converged=converged,
-    )
-    return surface, report
+    errors = surface._points(uv[:, 0], uv[:, 1]) - points
+    return surface, fit_report(SurfaceFitReport, errors, steps, uv, converged)
 
 
 def _check_smoothing(smoothing, dtype) -> Array | None:
@@ -207,12 +201,7 @@ def _check_options(correct_parameters, max_steps, tol, full_output):
     for name, flag in (("correct_parameters", correct_parameters), ("full_output", full_output)):
         if not isinstance(flag, bool):
             raise ValueError(f"{name} must be True or False, got {flag!r}")
-    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)):
-        raise ValueError(f"max_steps must be a Python int, got {max_steps!r}")
-    if max_steps <= 0:
-        raise ValueError(f"max_steps must be positive, got {max_steps}")
-    if tol is not None and not (np.ndim(tol) == 0 and np.isfinite(tol) and tol > 0):
-        raise ValueError(f"tol must be a finite number > 0, got {tol!r}")
+    check_solver_options(max_steps, tol)
 
 
 def _check_spread(uv: Array, variances: Array, what: str) -> Array:

@@ -189,3 +189,13 @@ def check_degree_pair(degree, name="degree"):
     """The degrees `(p, q)` of a surface, each a Python int >= 1."""
     p, q = check_pair(degree, name)
     return check_degree(p, name=f"{name} p"), check_degree(q, name=f"{name} q")
+
+
+def check_solver_options(max_steps, tol):
+    """`max_steps` a positive Python int; `tol` None or a finite number > 0."""
+    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)):
+        raise ValueError(f"max_steps must be a Python int, got {max_steps!r}")
+    if max_steps <= 0:
+        raise ValueError(f"max_steps must be positive, got {max_steps}")
+    if tol is not None and not (np.ndim(tol) == 0 and np.isfinite(tol) and tol > 0):
+        raise ValueError(f"tol must be a finite number > 0, got {tol!r}")

@@ -81,6 +81,22 @@ def test_gcv_same_as_scipy():
         assert x.size * np.sum((hat @ y - y) ** 2) / (x.size - np.trace(hat)) ** 2 > gcv
 
 
+def test_gcv_with_n_control_is_the_lowest_on_a_dense_grid():
+    rng = np.random.default_rng(17)
+    x, y = noisy_function(rng, m=80)
+    curve, report = dn.smooth(y, 20, x=x, full_output=True)
+
+    def gcv(lam):
+        hat = dense_hat(curve, x, np.ones(x.size), lam)
+        return x.size * np.sum((hat @ y - y) ** 2) / (x.size - np.trace(hat)) ** 2
+
+    assert float(report.gcv) == pytest.approx(gcv(float(report.penalty)), rel=1e-10)
+    # The global minimum: no lam of a fine grid over 16 decades scores lower.
+    grid = np.geomspace(1e-10, 1e6, 65)
+    assert float(report.gcv) <= min(gcv(lam) for lam in grid) * (1 + 1e-9)
+    assert gcv(0.9 * float(report.penalty)) > report.gcv < gcv(1.1 * float(report.penalty))
+
+
 @pytest.mark.parametrize("closed", [False, True])
 @pytest.mark.parametrize("n_control", [None, 15])
 def test_dof_is_trace_of_dense_hat_matrix(closed, n_control):
@@ -146,15 +162,21 @@ def test_large_penalty_tends_to_the_least_squares_polynomial(order):
     x, y = noisy_function(rng, m=40)
     w = rng.uniform(0.5, 2.0, x.size)
     expected = np.polyval(np.polyfit(x, y, order - 1, w=np.sqrt(w)), x)
-    # The distance to the limit falls as 1 / lam. (Not pushed to lam = 1e12: the normal
-    # equations then lose about eps * lam |R| / |N^T W N| of accuracy, as scipy's do.)
-    errors = [
-        np.abs(
-            dn.smooth(y, 10, x=x, weights=w, penalty_order=order, penalty=lam)(x)[:, 0] - expected
-        ).max()
-        for lam in (1e3, 1e4, 1e5)
-    ]
-    assert 5 < errors[0] / errors[1] < 20 and 5 < errors[1] / errors[2] < 20
+    # The distance to the limit falls as 1 / lam all the way to lam = 1e12, also with knots
+    # at every point (min spacing 0.002, |R| ~ 1e8 for r = 2): the normal equations lost
+    # the polynomial part once eps lam |R| neared |N^T W N| (lam ~ 1e5 for r = 2, 1e3 for
+    # r = 3; scipy's make_smoothing_spline alike).
+    lams = (1e3, 1e6, 1e9, 1e12)
+    for n_control in (None, 10):
+        errors = [
+            np.abs(
+                dn.smooth(y, n_control, x=x, weights=w, penalty_order=order, penalty=lam)(x)[:, 0]
+                - expected
+            ).max()
+            for lam in lams
+        ]
+        # 1000 times closer for every factor 1000 of lam
+        assert np.all(np.abs(np.diff(np.log10(errors)) + 3) < 0.3), errors
     for n_control in (None, 10):
         # a target residual at or above the polynomial's gives the polynomial exactly
         curve, report = dn.smooth(
@@ -165,6 +187,43 @@ def test_large_penalty_tends_to_the_least_squares_polynomial(order):
         assert float(report.residual) == pytest.approx(np.sum(w * (expected - y) ** 2))
     closed = dn.smooth(y[:, None] * [1.0, -1.0], closed=True, weights=w, smoothing=1e6)
     assert np.allclose(closed.control_points, np.average(y, weights=w) * np.array([1.0, -1.0]))
+
+
+def test_large_penalty_periodic_tends_to_the_weighted_mean():
+    rng = np.random.default_rng(15)
+    points = noisy_circle(rng, m=50)
+    w = rng.uniform(0.5, 2.0, 50)
+    mean = np.average(points, axis=0, weights=w)
+    for n_control in (None, 12):
+        errors = [
+            np.abs(
+                dn.smooth(points, n_control, weights=w, penalty=lam, closed=True).control_points
+                - mean
+            ).max()
+            for lam in (1e3, 1e6, 1e9, 1e12)
+        ]
+        # 1000 times closer for every factor 1000 of lam
+        assert np.all(np.abs(np.diff(np.log10(errors)) + 3) < 0.3), errors
+
+
+@pytest.mark.parametrize("order, m", [(2, 10_000), (3, 1000)])
+def test_polynomial_data_are_kept_at_any_penalty(order, m):
+    # A polynomial of degree < r costs no penalty, so it is its own smoothing spline for
+    # every lam: an exact oracle where lam |R| reaches 1e20 (|R| ~ spacing^(1 - 2r)). For
+    # r = 2, m = 10^4 the normal equations were off by 2e-6 at lam = 1 and 6e-3 at lam = 1e4
+    # (scipy's make_smoothing_spline by 3e-5 and 0.9). Rounding still grows with the
+    # conditioning of R, ~ m^(2r): for r = 3 at m = 10^4 it reaches 1e-8 at lam ~ 1e-4,
+    # hence m = 1000 there.
+    rng = np.random.default_rng(16)
+    x = np.linspace(0.0, 1.0, m) + rng.uniform(-0.3, 0.3, m) / m
+    coefficients = [0.8, -0.7, 0.3][3 - order :]
+    at = np.linspace(x[0], x[-1], 501)
+    for lam in (1e-4, 1.0, 1e4, 1e8):
+        curve, report = dn.smooth(
+            np.polyval(coefficients, x), x=x, penalty=lam, penalty_order=order, full_output=True
+        )
+        assert np.allclose(curve(at)[:, 0], np.polyval(coefficients, at), rtol=0, atol=1e-10)
+    assert float(report.dof) == pytest.approx(order, rel=1e-6)  # the polynomial's dof
 
 
 def test_smoothing_target_is_met_and_monotone():

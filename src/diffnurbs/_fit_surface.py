@@ -128,7 +128,9 @@ def fit_surface(
       parameters, `eps` that of the points' dtype): it changes a fit of well-spread data
       at the level of `sqrt(eps)` yet keeps the system regular, so regions without data
       (a hole, the corners of the PCA rectangle that a rotated cloud leaves empty) get
-      the least-bending continuation of the rest.
+      the least-bending continuation of the rest. That continuation follows the nearby
+      data, noise included: over a hole in noisy data, a real weight (`smoothing > 0`)
+      is what keeps the surface fair.
     - `correct_parameters`: alternate the solve with projections onto the surface.
     - `max_steps`: limit on the rounds of parameter correction.
     - `tol`: stop correcting when a round lowers the objective by less than `tol` times

@@ -2,7 +2,7 @@
 
 The comparable problem: a height field `z(x, y)` sampled at points mirrored in both axes,
 so that the cloud's principal directions are exactly the x and y axes and the PCA
-parameters are affine in `x` and `y`. Without smoothing and parameter correction
+parameters are affine in `x` and `y`. Without penalty and parameter correction
 `fit_surface` then solves the least-squares problem of scipy's `LSQBivariateSpline` with
 the same interior knots (uniform over the cloud's extent, `kx = ky = 3`): their heights
 must agree. scipy fits height fields only; the case with parameter correction (a half
@@ -46,7 +46,7 @@ def least_squares_case(rng: np.random.Generator) -> Case:
     device = jnp.asarray(points)
 
     def fit():
-        return dn.fit_surface(device, CONTROL, smoothing=0.0, correct_parameters=False)
+        return dn.fit_surface(device, CONTROL, penalty=0.0, correct_parameters=False)
 
     surface = fit()
     # scipy gets the same interior knots: uniform over the cloud's extent (its bounding
@@ -62,7 +62,7 @@ def least_squares_case(rng: np.random.Generator) -> Case:
     error = np.abs(fitted[:, 2] - _height(x, y)).max()
     return Case(
         f"fit_surface: {POINTS:.0e} scattered points of a height field, "
-        f"{CONTROL[0]} x {CONTROL[1]} bicubic, least squares (no smoothing, PCA parameters, "
+        f"{CONTROL[0]} x {CONTROL[1]} bicubic, least squares (no penalty, PCA parameters, "
         f"no correction; largest error {error:.1e})",
         {
             "diffnurbs": Impl(

@@ -49,8 +49,8 @@ def xy_plane():
     return dn.NURBSSurface(corners, (1, 1))
 
 
-@pytest.mark.parametrize("smoothing", [0.0, None, 1.0])
-def test_recovers_a_plane_with_any_smoothing(rng, smoothing):
+@pytest.mark.parametrize("penalty", [0.0, None, 1.0])
+def test_recovers_a_plane_with_any_penalty(rng, penalty):
     # A tilted plane, sampled over an ellipse: PCA finds the plane, the parameters are
     # affine in its coordinates, and affine maps have zero thin-plate energy.
     frame, _ = np.linalg.qr(rng.standard_normal((3, 3)))
@@ -59,7 +59,7 @@ def test_recovers_a_plane_with_any_smoothing(rng, smoothing):
     origin = np.array([1.0, -2.0, 0.5])
     points = origin + local @ frame[:, :2].T
     surface, report = dn.fit_surface(
-        points, (5, 4), smoothing=smoothing, correct_parameters=False, full_output=True
+        points, (5, 4), penalty=penalty, correct_parameters=False, full_output=True
     )
     uv = fresh_parameters(rng)
     samples = np.asarray(surface(uv[:, 0], uv[:, 1]))
@@ -77,7 +77,7 @@ def test_recovers_a_plane_with_any_smoothing(rng, smoothing):
 def test_recovers_a_paraboloid_from_pca_parameters(rng):
     points = paraboloid(mirrored(rng.uniform(0.0, 1.0, (100, 2)) * [1.2, 1.0]))
     surface, report = dn.fit_surface(
-        points, (4, 5), smoothing=0.0, correct_parameters=False, full_output=True
+        points, (4, 5), penalty=0.0, correct_parameters=False, full_output=True
     )
     x, y, z = np.asarray(surface(*fresh_parameters(rng).T)).T
     assert np.abs(z - x**2 - y**2).max() <= 1e-12
@@ -100,7 +100,7 @@ def test_recovers_a_random_bspline_height_field_with_its_knots(rng, correct_para
         counts,
         degrees,
         base=xy_plane(),
-        smoothing=0.0,
+        penalty=0.0,
         correct_parameters=correct_parameters,
         full_output=True,
     )
@@ -132,7 +132,7 @@ def dense_basis(uv, counts, degrees):
 def test_unpenalised_control_points_match_dense_lstsq(rng):
     points, counts, degrees = wavy_cloud(rng), (6, 5), (3, 2)
     surface, report = dn.fit_surface(
-        points, counts, degrees, smoothing=0.0, correct_parameters=False, full_output=True
+        points, counts, degrees, penalty=0.0, correct_parameters=False, full_output=True
     )
     matrix = dense_basis(np.asarray(report.parameters), counts, degrees)
     expected = np.linalg.lstsq(matrix, points, rcond=None)[0].reshape(*counts, 3)
@@ -158,9 +158,9 @@ def gram_by_quadrature(n, degree, order):
 
 
 def test_penalised_fit_solves_the_normal_equations_with_the_thin_plate_energy(rng):
-    points, counts, degrees, smoothing = wavy_cloud(rng), (6, 5), (3, 2), 1e-3
+    points, counts, degrees, penalty = wavy_cloud(rng), (6, 5), (3, 2), 1e-3
     surface, report = dn.fit_surface(
-        points, counts, degrees, smoothing=smoothing, correct_parameters=False, full_output=True
+        points, counts, degrees, penalty=penalty, correct_parameters=False, full_output=True
     )
     (m0u, k1u, k2u), (m0v, k1v, k2v) = (
         [gram_by_quadrature(n, p, order) for order in range(3)]
@@ -169,12 +169,12 @@ def test_penalised_fit_solves_the_normal_equations_with_the_thin_plate_energy(rn
     energy = np.kron(k2u, m0v) + 2 * np.kron(k1u, k1v) + np.kron(m0u, k2v)
     matrix = dense_basis(np.asarray(report.parameters), counts, degrees)
     m = points.shape[0]
-    expected = np.linalg.solve(matrix.T @ matrix / m + smoothing * energy, matrix.T @ points / m)
+    expected = np.linalg.solve(matrix.T @ matrix / m + penalty * energy, matrix.T @ points / m)
     np.testing.assert_allclose(
         surface.control_points, expected.reshape(*counts, 3), rtol=0, atol=1e-9
     )
     # The penalty matters at this weight: the unpenalised fit is another surface.
-    plain = dn.fit_surface(points, counts, degrees, smoothing=0.0, correct_parameters=False)
+    plain = dn.fit_surface(points, counts, degrees, penalty=0.0, correct_parameters=False)
     assert np.abs(np.asarray(plain.control_points) - expected.reshape(*counts, 3)).max() > 1e-2
 
 
@@ -188,7 +188,7 @@ def cylinder_patch(rng, count=600):
 def test_parameter_correction_lowers_the_residual_every_round(rng):
     points = cylinder_patch(rng)
     fits = [
-        dn.fit_surface(points, (8, 4), smoothing=0.0, max_steps=steps, tol=1e-30, full_output=True)
+        dn.fit_surface(points, (8, 4), penalty=0.0, max_steps=steps, tol=1e-30, full_output=True)
         for steps in (1, 2, 3, 4, 6, 8, 12, 16, 24)
     ]
     rms = [float(report.rms_residual) for _, report in fits]
@@ -196,7 +196,7 @@ def test_parameter_correction_lowers_the_residual_every_round(rng):
     assert not any(bool(report.converged) for _, report in fits)
     assert all(later < earlier for earlier, later in itertools.pairwise(rms))
     _, plain = dn.fit_surface(
-        points, (8, 4), smoothing=0.0, correct_parameters=False, full_output=True
+        points, (8, 4), penalty=0.0, correct_parameters=False, full_output=True
     )
     assert rms[-1] < float(plain.rms_residual) / 3
     # The report's residuals are the distances to the nearest points of the surface, as
@@ -228,19 +228,19 @@ def test_a_hole_is_filled_fairly(rng):
     hole = (np.abs(xy[:, 0]) < 0.7) & (np.abs(xy[:, 1]) < 0.6)
     points = paraboloid(xy[~hole])
     with pytest.raises(ValueError, match="singular"):
-        dn.fit_surface(points, (12, 12), smoothing=0.0, correct_parameters=False)
+        dn.fit_surface(points, (12, 12), penalty=0.0, correct_parameters=False)
     grid = np.stack(np.meshgrid(np.linspace(0, 1, 41), np.linspace(0, 1, 41)), -1).reshape(-1, 2)
     errors = {}
-    for smoothing in (None, 1e-4):
-        surface = dn.fit_surface(points, (12, 12), smoothing=smoothing, correct_parameters=False)
+    for penalty in (None, 1e-4):
+        surface = dn.fit_surface(points, (12, 12), penalty=penalty, correct_parameters=False)
         x, y, z = np.asarray(surface(grid[:, 0], grid[:, 1])).T
         inside = (np.abs(x) < 0.7) & (np.abs(y) < 0.6)
         assert inside.sum() > 100
-        errors[smoothing] = np.abs(z - x**2 - y**2), inside
+        errors[penalty] = np.abs(z - x**2 - y**2), inside
     # The regularising default: the quadratic to about sqrt(eps), hole included.
     error, inside = errors[None]
     assert error.max() <= 1e-7
-    # Strong smoothing flattens the paraboloid everywhere (by up to 0.17), but over the
+    # Strong penalty flattens the paraboloid everywhere (by up to 0.17), but over the
     # hole it strays no farther than over the data.
     error, inside = errors[1e-4]
     assert 1e-2 < error[~inside].max() < 0.5
@@ -250,8 +250,8 @@ def test_a_hole_is_filled_fairly(rng):
 @pytest.mark.parametrize(
     "options",
     [
-        dict(smoothing=1e-3, correct_parameters=False),
-        dict(smoothing=0.0, correct_parameters=False, base="plane"),
+        dict(penalty=1e-3, correct_parameters=False),
+        dict(penalty=0.0, correct_parameters=False, base="plane"),
     ],
 )
 def test_gradient_with_respect_to_the_points_matches_finite_differences(rng, options):
@@ -273,16 +273,16 @@ def test_gradient_with_respect_to_the_points_matches_finite_differences(rng, opt
     np.testing.assert_allclose(jnp.vdot(gradient, direction), difference, rtol=1e-6)
 
 
-def test_gradient_with_respect_to_smoothing_matches_finite_differences(rng):
+def test_gradient_with_respect_to_the_penalty_matches_finite_differences(rng):
     points = wavy_cloud(rng, 60)
 
-    def loss(smoothing):
-        surface = dn.fit_surface(points, (4, 4), smoothing=smoothing, correct_parameters=False)
+    def loss(penalty):
+        surface = dn.fit_surface(points, (4, 4), penalty=penalty, correct_parameters=False)
         return jnp.sum(surface(0.3, 0.6) ** 2)
 
-    smoothing, h = 1e-3, 1e-7
-    difference = (loss(smoothing + h) - loss(smoothing - h)) / (2 * h)
-    np.testing.assert_allclose(jax.grad(loss)(smoothing), difference, rtol=1e-6)
+    penalty, h = 1e-3, 1e-7
+    difference = (loss(penalty + h) - loss(penalty - h)) / (2 * h)
+    np.testing.assert_allclose(jax.grad(loss)(penalty), difference, rtol=1e-6)
 
 
 def line(count=20):
@@ -293,7 +293,7 @@ def line(count=20):
 @pytest.mark.parametrize(
     ("points", "kwargs", "message"),
     [
-        ("cloud", dict(n_control=(6, 6), smoothing=0.0), "at least nu \\* nv = 36 points"),
+        ("cloud", dict(n_control=(6, 6), penalty=0.0), "at least nu \\* nv = 36 points"),
         ("nan", {}, "points must be finite"),
         (np.zeros((30, 2)), {}, "shape \\(m, 3\\)"),
         (np.zeros((30, 3, 1)), {}, "2 dimensions"),
@@ -302,9 +302,9 @@ def line(count=20):
         ("cloud", dict(n_control=(3, 4)), "at least p \\+ 1 = 4 control points along u"),
         ("cloud", dict(n_control=4), "n_control must be a pair"),
         ("cloud", dict(n_control=(4.0, 4)), "n_control along u must be a Python int"),
-        ("cloud", dict(smoothing=-1.0), "smoothing must be a finite number >= 0"),
-        ("cloud", dict(smoothing=np.nan), "smoothing must be a finite number >= 0"),
-        ("cloud", dict(smoothing=[1.0]), "smoothing must be a finite number >= 0"),
+        ("cloud", dict(penalty=-1.0), "penalty must be a finite number >= 0"),
+        ("cloud", dict(penalty=np.nan), "penalty must be a finite number >= 0"),
+        ("cloud", dict(penalty=[1.0]), "penalty must be a finite number >= 0"),
         (line(), {}, "lie on a line, so their PCA plane is undefined"),
         (np.ones((30, 3)), {}, "lie on a line"),
         ("cloud", dict(base="not a surface"), "base must be a surface"),

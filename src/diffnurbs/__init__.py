@@ -11,8 +11,10 @@ Naming convention, followed by every public function and class:
 - `order`: the highest derivative order asked for (`curve.derivatives(u, order)`).
 - `u`, `v`: curve and surface parameters; `us`, `vs`: the axes of a tensor grid.
 - Fitting functions take `(data, n_control, degree, ...)` in that order (`approximate`,
-  `approximate_surface`, `fit_curve`, `approximation_knots`); where there is no
-  `n_control` (interpolation) the degree follows the data.
+  `approximate_surface`, `fit_curve`, `fit_surface`, `smooth`, `approximation_knots`);
+  where there is no `n_control` (interpolation) the degree follows the data. `closed=True`
+  fits a periodic curve; `penalty` is the weight of a roughness penalty (`smooth`,
+  `fit_surface`), `smoothing` the residual that chooses it (`smooth`).
 - `max_steps`: the limit of any iterative solver; `tol`: its tolerance.
 - `direction`: `"u"` or `"v"`, the keyword-only last argument of every surface operation
   that acts along one direction (`insert_knot`, `refine`, `elevate_degree`).

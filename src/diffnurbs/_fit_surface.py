@@ -7,14 +7,14 @@ that plane scaled to `[0, 1]` over the cloud's extent; or a given surface, onto 
 points are projected. The control points of a B-spline surface with uniform clamped knots
 on `[0, 1]^2` then minimise
 
-    (1/m) sum_k |S(u_k, v_k) - Q_k|^2 + smoothing * E(S),
+    (1/m) sum_k |S(u_k, v_k) - Q_k|^2 + penalty * E(S),
     E(S) = integral over [0, 1]^2 of |S_uu|^2 + 2 |S_uv|^2 + |S_vv|^2,
 
 the thin-plate energy, a quadratic form `vec(P)^T R vec(P)` with
 `R = K2u (x) M0v + 2 K1u (x) K1v + M0u (x) K2v` (`Kk` the Gram matrices of the k-th
 derivatives of the basis functions of one direction, computed exactly by Gauss-Legendre
 quadrature in each knot span). Its null space is the affine maps of `(u, v)`, which any
-three data points not on a line determine: with `smoothing > 0` the system is positive
+three data points not on a line determine: with `penalty > 0` the system is positive
 definite however the data are spread (short of a line), and control points without data
 nearby follow the least-bending continuation of the rest (a hole is filled fairly).
 
@@ -86,7 +86,7 @@ def fit_surface(
     degree: tuple[int, int] = (3, 3),
     *,
     base: AbstractSurface | None = None,
-    smoothing: float | None = None,
+    penalty: float | None = None,
     correct_parameters: bool = True,
     max_steps: int = 16,
     tol: float | None = None,
@@ -94,14 +94,14 @@ def fit_surface(
 ):
     """Fit a B-spline surface to an unstructured point cloud in 3D.
 
-    Minimises `(1/m) sum_k |S(u_k, v_k) - Q_k|^2 + smoothing * E(S)`, `E` the thin-plate
+    Minimises `(1/m) sum_k |S(u_k, v_k) - Q_k|^2 + penalty * E(S)`, `E` the thin-plate
     energy `integral |S_uu|^2 + 2 |S_uv|^2 + |S_vv|^2` over the parameter square `[0, 1]^2`
     (see the module notes), over the control points of a B-spline surface with uniform
     clamped knots on `[0, 1]^2`. The parameters come from the PCA plane of the cloud or
     from `base`; `correct_parameters` then alternates solving and re-projecting the points
     onto the surface.
 
-    Data the model represents exactly are recovered to rounding with `smoothing=0`: a
+    Data the model represents exactly are recovered to rounding with `penalty=0`: a
     plane; a polynomial height field `z(x, y)` of degree at most `degree` whose PCA plane
     is the `xy` plane (the parameters are then affine in `x` and `y`); a B-spline height
     field with the same knots, its points parametrised by projection onto the `xy` plane
@@ -114,13 +114,13 @@ def fit_surface(
 
     **Arguments:**
 
-    - `points`: array of shape `(m, 3)`, not all on a line; with `smoothing == 0` at least
+    - `points`: array of shape `(m, 3)`, not all on a line; with `penalty == 0` at least
       `nu nv` of them, and every basis function must be non-zero at some point.
     - `n_control`: `(nu, nv)`, control points per direction, each at least the degree + 1.
     - `degree`: `(p, q)`.
     - `base`: a surface in 3D to project the points onto for their first parameters (its
       domain scaled to `[0, 1]^2`); None gives the PCA plane.
-    - `smoothing`: weight `>= 0` of the thin-plate energy (scale-free: both terms are
+    - `penalty`: weight `>= 0` of the thin-plate energy (scale-free: both terms are
       squared lengths). Its effect grows fast with the number of control points (the
       energy of a wiggle of a net grows like the fourth power of the spans' count): on a
       20 x 20 net, 1e-8 already smooths visibly. None gives a regularisation only,
@@ -129,7 +129,7 @@ def fit_surface(
       at the level of `sqrt(eps)` yet keeps the system regular, so regions without data
       (a hole, the corners of the PCA rectangle that a rotated cloud leaves empty) get
       the least-bending continuation of the rest. That continuation follows the nearby
-      data, noise included: over a hole in noisy data, a real weight (`smoothing > 0`)
+      data, noise included: over a hole in noisy data, a real weight (`penalty > 0`)
       is what keeps the surface fair.
     - `correct_parameters`: alternate the solve with projections onto the surface.
     - `max_steps`: limit on the rounds of parameter correction.
@@ -141,7 +141,7 @@ def fit_surface(
 
     The fitted non-rational `NURBSSurface` (domain `[0, 1]^2`); with `full_output`,
     `(surface, report)`. `jax.grad` of anything computed from them reaches the points and
-    `smoothing`: through the PCA plane (or the projection onto `base`) and the linear
+    `penalty`: through the PCA plane (or the projection onto `base`) and the linear
     solve. With `correct_parameters` the corrected parameters count as constants: the
     derivative is that of the last solve at fixed parameters, not of the alternating
     iteration (at its limit the parameters move with the points too, which this leaves
@@ -158,23 +158,19 @@ def fit_surface(
     )
     for count, d, axis in zip(counts, degrees, "uv", strict=True):
         check_control_count(count, d, f"control points along {axis}")
-    smoothing = _check_smoothing(smoothing, points.dtype)
-    if (
-        smoothing is not None
-        and concrete(smoothing) == 0
-        and points.shape[0] < counts[0] * counts[1]
-    ):
+    penalty = _check_penalty(penalty, points.dtype)
+    if penalty is not None and concrete(penalty) == 0 and points.shape[0] < counts[0] * counts[1]:
         raise ValueError(
             f"expected at least nu * nv = {counts[0] * counts[1]} points for "
-            f"{counts[0]} x {counts[1]} control points with smoothing = 0, got "
-            f"{points.shape[0]} (use fewer control points or smoothing > 0)"
+            f"{counts[0]} x {counts[1]} control points with penalty = 0, got "
+            f"{points.shape[0]} (use fewer control points or penalty > 0)"
         )
     _check_options(correct_parameters, max_steps, tol, full_output)
     uv = _plane_parameters(points) if base is None else _base_parameters(base, points)
     control, uv, steps, converged = _fit(
         points,
         uv,
-        smoothing,
+        penalty,
         jnp.asarray(max_steps),
         1e-3 if tol is None else float(tol),
         counts=counts,
@@ -188,15 +184,15 @@ def fit_surface(
     return surface, fit_report(SurfaceFitReport, errors, steps, uv, converged)
 
 
-def _check_smoothing(smoothing, dtype) -> Array | None:
-    if smoothing is None:
+def _check_penalty(penalty, dtype) -> Array | None:
+    if penalty is None:
         return None
-    value = concrete(smoothing)
+    value = concrete(penalty)
     if value is not None and not (value.ndim == 0 and np.isfinite(value) and value >= 0):
-        raise ValueError(f"smoothing must be a finite number >= 0, got {smoothing!r}")
-    if value is None and jnp.ndim(smoothing) != 0:
-        raise ValueError(f"smoothing must be a scalar, got shape {jnp.shape(smoothing)}")
-    return jnp.asarray(smoothing, dtype=dtype)
+        raise ValueError(f"penalty must be a finite number >= 0, got {penalty!r}")
+    if value is None and jnp.ndim(penalty) != 0:
+        raise ValueError(f"penalty must be a scalar, got shape {jnp.shape(penalty)}")
+    return jnp.asarray(penalty, dtype=dtype)
 
 
 def _check_options(correct_parameters, max_steps, tol, full_output):
@@ -364,16 +360,17 @@ def _project(control, uv, points, knots, degrees):
 
 
 @functools.partial(jax.jit, static_argnames=("counts", "degrees", "correct_parameters"))
-def _fit(points, uv, smoothing, max_steps, tol, *, counts, degrees, correct_parameters):
-    """`(control points, parameters, steps, converged)` of the fit."""
+def _fit(points, uv, weight, max_steps, tol, *, counts, degrees, correct_parameters):
+    """`(control points, parameters, steps, converged)` of the fit; `weight` that of the
+    thin-plate energy."""
     knots = tuple(
         clamped_knots(n, d, dtype=points.dtype) for n, d in zip(counts, degrees, strict=True)
     )
     energy = _thin_plate(knots, degrees)
-    if smoothing is None:
+    if weight is None:
         # A regularisation, not a model parameter: a constant for the derivatives.
-        smoothing = jax.lax.stop_gradient(_regularising(uv, knots, degrees, energy))
-    penalty = smoothing * energy
+        weight = jax.lax.stop_gradient(_regularising(uv, knots, degrees, energy))
+    penalty = weight * energy
     if not correct_parameters:
         control = _solve(points, uv, penalty, knots, degrees)
         return control, uv, jnp.asarray(0), jnp.asarray(True)

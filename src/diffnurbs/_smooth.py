@@ -674,8 +674,8 @@ def smooth(
     - `n_control`: None for knots at every data parameter, or the number of control
       points, `degree + 1 <= n_control <= m` (of one period when closed).
     - `degree`: the degree `p`.
-    - `smoothing`: the target residual `s >= 0`, or None for GCV (ignored with `penalty`,
-      which may not be given with it).
+    - `smoothing`: the target residual `s >= 0`, or None for GCV; giving both `smoothing`
+      and `penalty` is a `ValueError`.
     - `penalty_order`: the derivative order `r` penalised, `1 <= r <= p`.
     - `parametrization`: a method name (see `parametrize`) or increasing parameters (`m`,
       or `m + 1` when closed, as in `interpolate`).

@@ -1,16 +1,19 @@
 import itertools
+import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 from helpers import (
+    central_difference,
     naive_curve,
     nine_point_circle,
     partial_derivative,
     random_curve,
     sample_parameters,
 )
+from scipy.interpolate import BSpline
 
 import diffnurbs as dn
 
@@ -79,6 +82,71 @@ def test_derivatives_match_finite_differences(degree):
     second = (curve(inner + h) - 2 * curve(inner) + curve(inner - h)) / h**2
     np.testing.assert_allclose(ders[:, 1], first, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(ders[:, 2], second, rtol=1e-3, atol=1e-3)
+
+
+def scipy_derivatives(curve, u, order):
+    """`C^(0..order)` from scipy's `BSpline` (of the homogeneous points and the Leibniz rule
+    written out here, for a rational curve): an oracle independent of diffnurbs's evaluation."""
+    knots, p = np.asarray(curve.knots), curve.degree
+    points = np.asarray(curve.control_points)
+    if curve.weights is not None:
+        points = np.column_stack([points * np.asarray(curve.weights)[:, None], curve.weights])
+    spline = BSpline(knots, points, p)
+    a = [
+        spline(u, nu=k) if k <= p else np.zeros((len(u), points.shape[1])) for k in range(order + 1)
+    ]
+    if curve.weights is None:
+        return np.stack(a, axis=1)
+    ders = []
+    for k in range(order + 1):
+        v = a[k][:, :-1]
+        for i in range(1, k + 1):
+            v = v - math.comb(k, i) * a[i][:, -1:] * ders[k - i]
+        ders.append(v / a[0][:, -1:])
+    return np.stack(ders, axis=1)
+
+
+@pytest.mark.parametrize("degree", DEGREES)
+@pytest.mark.parametrize("rational", [False, True])
+def test_derivatives_at_many_parameters_match_scipy(degree, rational):
+    # Enough parameters per span that the curve evaluates from per-span Taylor tables
+    # (NURBSCurve._horner_columns); every knot and both ends included.
+    rng = np.random.default_rng(300 + degree + 10 * rational)
+    curve = random_curve(rng, degree, dim=3, rational=rational)
+    u = sample_parameters(rng, curve.knots, degree, count=400)
+    order = degree + 1
+    expected = scipy_derivatives(curve, u, order)
+    ders = curve.derivatives(u, order)
+    for k in range(order + 1):
+        scale = max(1.0, float(np.abs(expected[:, k]).max()))
+        np.testing.assert_allclose(ders[:, k], expected[:, k], atol=1e-11 * scale)
+    np.testing.assert_allclose(curve(u), expected[:, 0], atol=1e-12)
+
+
+def test_derivatives_at_many_parameters_have_gradients():
+    rng = np.random.default_rng(7)
+    knots = [0, 0, 0, 0, 0.25, 0.5, 0.7, 1, 1, 1, 1]  # distinct interior knots to move
+    curve = dn.NURBSCurve(rng.normal(size=(7, 2)), 3, knots, rng.uniform(0.5, 2, 7))
+    u = jnp.asarray(np.sort(rng.uniform(0.01, 0.99, 200)))
+    u = u[jnp.all(jnp.abs(u[:, None] - curve.knots) > 1e-3, axis=1)]  # smooth in the knots
+    assert len(u) >= 32 * 4  # the Taylor-table evaluation
+    direction = jnp.asarray(rng.normal(size=(3, 2)))
+
+    def loss(points, weights, knots):
+        ders = dn.NURBSCurve(points, 3, knots, weights).derivatives(u, 2)
+        return jnp.sum(ders * direction)
+
+    arguments = [curve.control_points, curve.weights, curve.knots]
+    grads = jax.grad(loss, argnums=(0, 1, 2))(*arguments)
+    inner = slice(4, -4)  # interior knots: moving an end knot would unclamp the knots
+    for i, (grad, part) in enumerate(zip(grads, [slice(None)] * 2 + [inner], strict=True)):
+
+        def along(x, i=i, part=part):
+            value = jnp.asarray(arguments[i]).at[part].set(x)
+            return float(loss(*arguments[:i], value, *arguments[i + 1 :]))
+
+        expected = central_difference(along, np.asarray(arguments[i])[part])
+        np.testing.assert_allclose(grad[part], expected, rtol=1e-6, atol=1e-6)
 
 
 def test_circle_geometry_is_exact():

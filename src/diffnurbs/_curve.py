@@ -1,5 +1,6 @@
 """NURBS curves: evaluation, derivatives and differential geometry."""
 
+import math
 import typing
 
 import equinox as eqx
@@ -8,14 +9,19 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from ._arclength import check_lengths, length_table, parameter_at_length, unit_speed_curve
-from ._basis import basis_funs, combine_local, ders_basis_funs, find_span, taylor_coefficients
+from ._basis import basis_funs, combine_local, ders_basis_funs, find_span, span_derivatives
 from ._inversion import curve_closest_point
 from ._knotops import bezier_pieces, checked_insertion, checked_refinement, elevate
 from ._knotremoval import check_tolerance, homogeneous_tolerance, reduce, remove, simplify
 from ._knots import clamped_knots
 from ._misc import clamp_to_domain, safe_divide, safe_norm, safe_normalize, safe_sqrt
 from ._quadrature import integrate_panels
-from ._rational import AbstractRationalSpline, from_homogeneous, rational_curve_derivatives
+from ._rational import (
+    AbstractRationalSpline,
+    from_homogeneous,
+    rational_columns,
+    rational_curve_derivatives,
+)
 from ._validate import (
     check_control_count,
     check_degree,
@@ -232,39 +238,53 @@ class NURBSCurve(AbstractRationalSpline):
         u = self._clamp(u)
         n_spans = self.knots.shape[0] - 2 * self.degree - 1
         if u.size >= _TABLE_POINTS_PER_SPAN * n_spans:
-            columns = self._horner_columns(u)
+            columns = self._horner_columns(u)[0]
             if self.rational:
-                columns = [column / columns[-1] for column in columns[:-1]]
+                reciprocal = 1 / columns[-1]  # one division per point, not one per coordinate
+                columns = [column * reciprocal for column in columns[:-1]]
             return jnp.stack(columns, axis=-1)
         span, funs = basis_funs(self.knots, self.degree, u)
         points = combine_local(funs, self.homogeneous_points(), span, self.degree)
         return from_homogeneous(points) if self.rational else points
 
-    def _horner_columns(self, u: Array) -> list[Array]:
-        """Homogeneous coordinates, one array each, by Horner's rule on Taylor coefficients.
+    def _horner_columns(self, u: Array, order: int = 0) -> list[list[Array]]:
+        """`columns[k][d]`: coordinate `d` of the homogeneous `k`-th derivative, by Horner's
+        rule on Taylor coefficients.
 
-        On span `i` the curve is the polynomial `sum_k C^(k)(u_i) (u - u_i)^k / k!`; the
-        coefficients come from CurveDerivs at the span starts (one call for all spans),
-        so every point costs a span search and `p` multiply-adds, with no division.
+        On span `i` the curve is the polynomial `sum_j C^(j)(u_i) (u - u_i)^j / j!`, and its
+        `k`-th derivative `sum_j C^(j + k)(u_i) (u - u_i)^j / j!`; the values `C^(j)(u_i)`
+        come from `span_derivatives` at the span starts (one call for all spans), so every
+        point costs a span search and `p - k` multiply-adds per coordinate, with no division.
         Coordinates are kept as separate arrays because XLA fuses each output element
         with everything it depends on: a stacked `(..., dim)` result would redo the
         span search and the other coordinates' work for every coordinate.
         """
         p = self.degree
+        # Every span's polynomial at its first knot (empty spans give unused rows).
+        spans = jnp.arange(p, self.knots.shape[0] - p - 1)
         starts = self.knots[p : -p - 1]
-        table = taylor_coefficients(self.knots, p, self.homogeneous_points(), starts)
+        ders = span_derivatives(self.knots, p, self.homogeneous_points(), spans, starts, p)
+        values = jnp.stack(ders, axis=1)  # C^(j)(u_i)
         span = find_span(self.knots, p, u)
         row, t = span - p, u - self.knots[span]
+        # 1 / j! as a factor: the table is computed once per span, not once per point.
+        inverse = jnp.asarray([1 / math.factorial(j) for j in range(p + 1)], dtype=values.dtype)
         columns = []
-        for d in range(table.shape[-1]):
-            value = table[:, p, d][row]
-            for k in range(p - 1, -1, -1):
-                value = value * t + table[:, k, d][row]
-            columns.append(value)
-        return columns
+        for k in range(min(order, p) + 1):
+            table = values[:, k:, :] * inverse[: p + 1 - k, None]
+            column = []
+            for d in range(values.shape[-1]):
+                value = table[:, p - k, d][row]
+                for j in range(p - k - 1, -1, -1):
+                    value = value * t + table[:, j, d][row]
+                column.append(value)
+            columns.append(column)
+        zeros = [jnp.zeros_like(u)] * values.shape[-1]
+        return columns + [zeros] * (order - min(order, p))
 
     def derivatives(self, u: ArrayLike, order: int) -> Float[Array, "... order+1 dim"]:
-        """`C(u), C'(u), ..., C^(order)(u)`: CurveDerivs, then the Leibniz rule if rational.
+        """`C(u), C'(u), ..., C^(order)(u)`: CurveDerivs, then the Leibniz rule if rational
+        (from per-span Taylor tables when there are many parameters per span, as for points).
 
         **Arguments:**
 
@@ -279,7 +299,16 @@ class NURBSCurve(AbstractRationalSpline):
 
     @eqx.filter_jit
     def _derivatives(self, u: Array, order: int) -> Array:
-        span, ders = ders_basis_funs(self.knots, self.degree, self._clamp(u), order)
+        u = self._clamp(u)
+        n_spans = self.knots.shape[0] - 2 * self.degree - 1
+        if u.size >= _TABLE_POINTS_PER_SPAN * n_spans:
+            columns = self._horner_columns(u, order)
+            if self.rational:
+                columns = rational_columns(
+                    [row[:-1] for row in columns], [row[-1] for row in columns]
+                )
+            return jnp.stack([jnp.stack(row, axis=-1) for row in columns], axis=-2)
+        span, ders = ders_basis_funs(self.knots, self.degree, u, order)
         homogeneous = combine_local(ders, self.homogeneous_points(), span, self.degree)
         if not self.rational:
             return homogeneous

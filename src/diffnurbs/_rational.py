@@ -59,13 +59,37 @@ def rational_curve_derivatives(
 
     `C^(0..d)`, shape `(..., d + 1, dim)`.
     """
-    ders = []
-    for k in range(a_ders.shape[-2]):
-        v = a_ders[..., k, :]
-        for i in range(1, k + 1):
-            v = v - math.comb(k, i) * w_ders[..., i, None] * ders[k - i]
-        ders.append(v / w_ders[..., 0, None])
+    count = a_ders.shape[-2]
+    ders = _quotient_rule(
+        [a_ders[..., k, :] for k in range(count)], [w_ders[..., k, None] for k in range(count)]
+    )
     return jnp.stack(ders, axis=-2)
+
+
+def _quotient_rule(a_ders: list, w_ders: list) -> list:
+    """`C^(k) = (A^(k) - sum_{i=1}^{k} binom(k, i) w^(i) C^(k-i)) / w` for lists of
+    broadcastable arrays `A^(k)`, `w^(k)`; one reciprocal of `w`, one product per term."""
+    reciprocal = 1 / w_ders[0]
+    ders = []
+    for k, v in enumerate(a_ders):
+        for i in range(1, k + 1):
+            v = v - math.comb(k, i) * w_ders[i] * ders[k - i]
+        ders.append(v * reciprocal)
+    return ders
+
+
+def rational_columns(a_ders: list[list[Array]], w_ders: list[Array]) -> list[list[Array]]:
+    """`rational_curve_derivatives` on one array per order and coordinate: `a_ders[k][d]`
+    and `w_ders[k]` give `C^(k)_d` as `result[k][d]`.
+
+    XLA fuses each element of a stacked array with everything it depends on, so a caller
+    that has its derivatives as separate arrays keeps them apart until its result is
+    stacked; multiplying by `1 / w` once keeps one division per point.
+    """
+    by_coordinate = [
+        _quotient_rule([row[d] for row in a_ders], w_ders) for d in range(len(a_ders[0]))
+    ]
+    return [list(row) for row in zip(*by_coordinate, strict=True)]
 
 
 def rational_surface_derivatives(

@@ -249,7 +249,7 @@ def correction_cases(rng: np.random.Generator) -> list[Case]:
                 title = f"cubic, random B-spline + noise 1e-3, {n_control} control points"
             result.append(
                 Case(
-                    f"{17 + len(result)}. fit_curve with parameter correction, {count:.0e} "
+                    f"{23 + len(result)}. fit_curve with parameter correction, {count:.0e} "
                     f"points, {title}: {int(report.steps)} steps, {what}",
                     {
                         "diffnurbs": Impl(

@@ -46,7 +46,8 @@ SIZES = {
     "geomdl_derivatives": 1000,
     "geomdl_surface": 1000,
 }
-# Cases of the later issues: geometry toolkit (7-10), PH curves (11), fitting (12-18).
+# Cases of the later issues: geometry toolkit (7-10, 19-22), PH curves (11), fitting (12-16, 23-26,
+# smoothing, scattered surfaces), point inversion (17-18).
 TOPIC_CASES = (
     cases_geometry,
     cases_ph,

@@ -38,11 +38,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
-from ._basis import basis_funs, ders_basis_funs
+from ._basis import basis_funs
 from ._fit_curve import fit_report
 from ._interpolate import _data_points, check_solved
 from ._inversion import _bounds, _minimise, _surface_model
 from ._knots import clamped_knots
+from ._smooth import _band_entries, penalty_band
 from ._surface import AbstractSurface, NURBSSurface
 from ._validate import (
     check_control_count,
@@ -252,20 +253,18 @@ def _base_parameters(base, points: Array) -> Array:
 
 
 def _gram_matrices(knots: Array, degree: int) -> Array:
-    """`G[k, i, j] = integral N_i^(k) N_j^(k)` over the domain, `k = 0, 1, 2`: exact, by
-    `degree + 1` Gauss-Legendre nodes per knot span (the products have degree `2 p`)."""
+    """`G[k, i, j] = integral N_i^(k) N_j^(k)` over the domain, `k = 0, 1, 2`: the penalty
+    matrices of `smooth` (exact Gauss-Legendre), dense; zero above the degree."""
     n = knots.shape[0] - degree - 1
-    nodes, weights = (
-        jnp.asarray(a, knots.dtype) for a in np.polynomial.legendre.leggauss(degree + 1)
+    rows, cols = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    return jnp.stack(
+        [
+            _band_entries(penalty_band(knots, degree, k), rows, cols)
+            if k <= degree
+            else jnp.zeros((n, n), knots.dtype)
+            for k in range(3)
+        ]
     )
-    lo, hi = knots[degree:n], knots[degree + 1 : n + 1]  # the spans of the domain
-    x = (lo[:, None] + hi[:, None]) / 2 + (hi - lo)[:, None] / 2 * nodes
-    w = ((hi - lo)[:, None] / 2 * weights).ravel()
-    span, ders = ders_basis_funs(knots, degree, x.ravel(), 2)  # (N, 3, p + 1)
-    index = span[:, None] - degree + jnp.arange(degree + 1)
-    products = w[:, None, None, None] * ders[:, :, :, None] * ders[:, :, None, :]
-    gram = jnp.zeros((3, n, n), knots.dtype)
-    return gram.at[:, index[:, :, None], index[:, None, :]].add(jnp.moveaxis(products, 1, 0))
 
 
 def _thin_plate(knots: tuple[Array, Array], degrees: tuple[int, int]) -> Array:

@@ -4,7 +4,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 # System packages, installed with apt where missing: libgl1 and libegl1 for pyvista's headless
-# rendering (EGL), chromium for the browser tests (tests/test_browser.py).
+# rendering (EGL), chromium for the browser tests (tests/test_browser.py), bubblewrap for the
+# grader's sandbox (src/diffnurbs_course/_sandbox.py).
 export VTK_DEFAULT_OPENGL_WINDOW ?= vtkEGLRenderWindow
 export PYVISTA_OFF_SCREEN ?= true
 
@@ -23,6 +24,7 @@ system-libs:
 	ldconfig -p | grep -q 'libEGL.so.1' || missing="$$missing libegl1"; \
 	ldconfig -p | grep -q 'libGL.so.1' || missing="$$missing libgl1"; \
 	command -v chromium >/dev/null || missing="$$missing chromium"; \
+	command -v bwrap >/dev/null || missing="$$missing bubblewrap"; \
 	if [ -z "$$missing" ]; then :; \
 	elif command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
 		apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \

@@ -222,7 +222,14 @@ def basis_matrix(knots: ArrayLike, degree: int, u: ArrayLike) -> Float[Array, "m
     u = jnp.asarray(u, dtype=jnp.result_type(knots.dtype, float))
     if u.ndim != 1:
         raise ValueError(f"u must be a 1-D array of parameters, got shape {u.shape}")
-    span, funs = basis_funs(knots, degree, u)
+    check_degree(degree, minimum=0)
+    check_basis_arguments(knots, degree, u)
+    return _basis_matrix(knots, degree, u)
+
+
+@functools.partial(jax.jit, static_argnums=1)
+def _basis_matrix(knots, degree, u):
+    span, funs = _basis_funs(knots, degree, u)
     return dense_basis(span, funs, degree, knots.shape[0] - degree - 1)
 
 
@@ -335,17 +342,32 @@ def cox_de_boor(knots: ArrayLike, degree: int, i: int, u: ArrayLike) -> Float[Ar
             f"basis index i must be in [0, {knots.shape[0] - degree - 2}] for "
             f"{knots.shape[0]} knots and degree {degree}, got {i}"
         )
+    if isinstance(knots, jax.core.Tracer) or isinstance(u, jax.core.Tracer):
+        return _cox_de_boor(knots, degree, i, u)  # inlined into the caller's program
+    return _compiled_cox_de_boor(knots, degree, i, u)
+
+
+def _cox_de_boor(knots, degree, i, u):
     if degree == 0:
         inside = (knots[i] <= u) & (u < knots[i + 1])
-        # The closed end: u == u_max belongs to the last span of positive length.
-        last_nonempty = (knots[i] < knots[i + 1]) & jnp.all(knots[i + 1 :] == knots[i + 1])
+        # The closed end: u == u_max belongs to the last span of positive length, the one
+        # after which every knot equals its end knot.
+        after = jnp.arange(knots.shape[0]) > i
+        last_nonempty = (knots[i] < knots[i + 1]) & jnp.all(~after | (knots == knots[i + 1]))
         at_end = last_nonempty & (u == knots[i + 1])
         return jnp.where(inside | at_end, 1.0, 0.0).astype(u.dtype)
     rising = safe_divide(u - knots[i], knots[i + degree] - knots[i])
     falling = safe_divide(knots[i + degree + 1] - u, knots[i + degree + 1] - knots[i + 1])
-    return rising * cox_de_boor(knots, degree - 1, i, u) + falling * cox_de_boor(
+    return rising * _cox_de_boor(knots, degree - 1, i, u) + falling * _cox_de_boor(
         knots, degree - 1, i + 1, u
     )
+
+
+# Called eagerly: one compiled program per knot count, degree and parameter shape, `i` an
+# argument of it. Run op by op, each of the recursion's 2^p terms dispatched (and compiled)
+# a few small programs, for every `i` (a chapter's basis plots compiled hundreds of them);
+# under a caller's trace, `i` stays a Python int and the recursion is traced in place.
+_compiled_cox_de_boor = jax.jit(_cox_de_boor, static_argnums=1)
 
 
 @functools.partial(jax.jit, static_argnums=0)

@@ -1,8 +1,10 @@
 """De Casteljau's algorithm for Bezier curves, surfaces and volumes; matrix form, subdivision
 and hodographs."""
 
+import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -51,7 +53,14 @@ def de_casteljau(
     Array of shape `t.shape + (dim,)`.
     """
     net, rational = _homogeneous_net(control_points, weights, 2, "(n_control, dim)")
-    points = _casteljau(net, jnp.asarray(t, dtype=net.dtype))
+    return _curve_points(net, jnp.asarray(t, dtype=net.dtype), rational)
+
+
+# The evaluations below are compiled once per shape of net and parameters: run eagerly, each
+# level of the triangle dispatched (and compiled) its own small programs, hundreds per chapter.
+@functools.partial(jax.jit, static_argnums=2)
+def _curve_points(net, t, rational):
+    points = _casteljau(net, t)
     return from_homogeneous(points) if rational else points
 
 
@@ -73,7 +82,12 @@ def de_casteljau_surface(
     Array of shape `broadcast(u, v).shape + (dim,)`.
     """
     net, rational = _homogeneous_net(control_points, weights, 3, "(nu, nv, dim)")
-    u, v = jnp.broadcast_arrays(jnp.asarray(u, net.dtype), jnp.asarray(v, net.dtype))
+    return _surface_points(net, jnp.asarray(u, net.dtype), jnp.asarray(v, net.dtype), rational)
+
+
+@functools.partial(jax.jit, static_argnums=3)
+def _surface_points(net, u, v, rational):
+    u, v = jnp.broadcast_arrays(u, v)
     rows = _casteljau(net, v[..., None])  # one point per row: (..., n + 1, D)
     points = _casteljau(rows, u)
     return from_homogeneous(points) if rational else points
@@ -148,6 +162,11 @@ def subdivide(control_points: ArrayLike, t: ArrayLike, weights: ArrayLike | None
     net, rational = _homogeneous_net(control_points, weights, 2, "(n_control, dim)")
     t = jnp.asarray(t, dtype=net.dtype)
     _check_unit_parameter(t, "t")
+    return _subdivide(net, t, rational)
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _subdivide(net, t, rational):
     tt = t[..., None, None]
     q = jnp.broadcast_to(net, t.shape + net.shape)
     left, right = [q[..., 0, :]], [q[..., -1, :]]
@@ -223,8 +242,12 @@ def de_casteljau_volume(
     u, v, w = jnp.broadcast_arrays(*(jnp.asarray(x, net.dtype) for x in (u, v, w)))
     for x, name in ((u, "u"), (v, "v"), (w, "w")):
         _check_unit_parameter(x, name)
+    return _volume_points(net, u, v, w, rational)
+
+
+@functools.partial(jax.jit, static_argnums=4)
+def _volume_points(net, u, v, w, rational):
     q = jnp.broadcast_to(net, u.shape + net.shape)
     for t in (w, v, u):  # contract the last parameter axis: w, then v, then u
         q = _casteljau_batched(q, t)
-    points = q
-    return from_homogeneous(points) if rational else points
+    return from_homogeneous(q) if rational else q

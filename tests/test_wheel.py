@@ -137,8 +137,8 @@ def test_installed_grader_scores_the_demo(installed, tmp_path):
     # On a failure, what the grader printed and its per-test report say why.
     why = f"{result.stdout}\n{result.stderr}\n{(tmp_path / 'report.json').read_text()[:4000]}"
     assert rows == {
-        "master/99_demo.ipynb": {"q1": "2", "q2": "3", "total": "5", "max": "5"},
-        "blank/99_demo.ipynb": {"q1": "0", "q2": "0", "total": "0", "max": "5"},
+        "master/99_demo.ipynb": {"q1": "2", "q2": "3", "total": "5", "max": "5", "flags": ""},
+        "blank/99_demo.ipynb": {"q1": "0", "q2": "0", "total": "0", "max": "5", "flags": ""},
     }, why
 
 

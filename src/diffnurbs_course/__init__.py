@@ -18,14 +18,24 @@ from ._exercises import (
     notebook_sources as notebook_sources,
 )
 from ._feedback import NOT_ANSWERED as NOT_ANSWERED, Feedback as Feedback, Notebook as Notebook
+from ._flags import (
+    batch_flags as batch_flags,
+    handed_out_code as handed_out_code,
+    submission_flags as submission_flags,
+)
 from ._grading import (
+    CELL_TIMEOUT as CELL_TIMEOUT,
     CHECK_TIMEOUT as CHECK_TIMEOUT,
     DEFAULT_TIMEOUT as DEFAULT_TIMEOUT,
-    INIT_TIMEOUT as INIT_TIMEOUT,
+    MAX_RESTARTS as MAX_RESTARTS,
+    MESSAGE_LIMIT as MESSAGE_LIMIT,
+    OUTPUT_LIMIT as OUTPUT_LIMIT,
     RECOVERY_TIMEOUT as RECOVERY_TIMEOUT,
+    SANDBOX_LIMITS as SANDBOX_LIMITS,
     GradeResult as GradeResult,
     grade_notebook as grade_notebook,
 )
+from ._handback import write_feedback as write_feedback
 from ._layout import CourseLayout as CourseLayout, find_solutions as find_solutions
 from ._masters import (
     Master as Master,
@@ -55,6 +65,7 @@ from ._otter import (
     Assigned as Assigned,
     assign as assign,
     assignment_config_text as assignment_config_text,
+    autograder_zip as autograder_zip,
     hidden_cases as hidden_cases,
     otter_tests as otter_tests,
 )
@@ -71,6 +82,13 @@ from ._report import (
     heading_anchors as heading_anchors,
     jupyter_anchor as jupyter_anchor,
 )
+from ._sandbox import (
+    SCRATCH as SCRATCH,
+    AsyncSandboxKernelManager as AsyncSandboxKernelManager,
+    SandboxKernelManager as SandboxKernelManager,
+    SandboxLimits as SandboxLimits,
+    sandbox_problem as sandbox_problem,
+)
 from ._scores import question_columns as question_columns, write_csv as write_csv
-from ._session import KernelSession as KernelSession
+from ._scoring import KernelLost as KernelLost, Scorer as Scorer, StudentError as StudentError
 from ._site import build_site as build_site, stage_site as stage_site

@@ -6,10 +6,12 @@ import multiprocessing
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from pathlib import Path
+from typing import Any
 
 import nbformat
 
-from ._grading import DEFAULT_TIMEOUT, GradeResult, grade_notebook
+from ._flags import batch_flags
+from ._grading import GradeResult, grade_notebook
 from ._masters import Master, load_masters, match_master
 from ._notebooks import notebooks, read_notebook
 
@@ -31,15 +33,29 @@ def _peek(path: Path) -> nbformat.NotebookNode | None:
         return None
 
 
-def _grade_one(path: Path, label: str, master: Master | None, timeout: float) -> GradeResult:
-    if master is None:
-        return GradeResult(label, None, notes=["no master in the solutions folder matches it"])
+def _match(path: Path, names: list[str]) -> tuple[str | None, str | None]:
+    """The master a file answers and, when it cannot be told, why (never raises)."""
+    if path.is_symlink():  # it could point at a file of the teacher's: never read it
+        return None, "a symbolic link: not graded"
     try:
-        result = grade_notebook(path, master, timeout=timeout, label=label)
+        return match_master(path, _peek(path), names), None
+    except Exception as error:
+        return None, f"could not be matched to a master: {type(error).__name__}: {error}"
+
+
+def _grade_one(
+    path: Path, label: str, master: Master | None, why: str | None, options: dict[str, Any]
+) -> GradeResult:
+    if master is None:
+        return GradeResult(
+            label, None, notes=[why or "no master in the solutions folder matches it"]
+        )
+    try:
+        result = grade_notebook(path, master, label=label, **options)
     except Exception as error:  # the grader's own failure: report it, grade the rest
         result = GradeResult(label, master.name, dict.fromkeys(master.questions, 0.0))
         result.possible = dict(master.possible)
-        result.notes.append(f"grading failed: {type(error).__name__}: {error}")
+        result.notes.append(f"grading failed: {type(error).__name__}: {str(error)[:2000]}")
     result.executed = None
     return result
 
@@ -48,9 +64,9 @@ def grade_directory(
     submissions: Path,
     solutions: Path,
     *,
-    timeout: float = DEFAULT_TIMEOUT,
     jobs: int = 1,
     progress: Callable[[int, int, GradeResult], None] | None = None,
+    **options: Any,
 ) -> list[GradeResult]:
     """Grade every notebook under a folder.
 
@@ -58,20 +74,28 @@ def grade_directory(
 
     - `submissions`: the folder of submitted notebooks (searched recursively).
     - `solutions`: the folder of masters.
-    - `timeout`: seconds each submission's cells may run together.
     - `jobs`: how many notebooks to grade at once.
     - `progress`: called as `progress(done, total, result)` after each notebook.
+    - `options`: passed to `grade_notebook` (`timeout`, `cell_timeout`, `check_timeout`,
+      `limits`).
 
     **Returns:**
 
-    One `GradeResult` per notebook, in file order.
+    One `GradeResult` per notebook, in file order, with the batch's flags (`batch_flags`).
     """
     paths = find_submissions(submissions)
     names = [p.stem for p in notebooks(solutions)]
-    matched = {p: match_master(p, _peek(p), names) for p in paths}
-    masters = load_masters(solutions, {m for m in matched.values() if m})
+    matched = {p: _match(p, names) for p in paths}
+    masters = load_masters(solutions, {m for m, _ in matched.values() if m})
     tasks = [
-        (p, str(p.relative_to(submissions)), masters.get(matched[p] or ""), timeout) for p in paths
+        (
+            p,
+            str(p.relative_to(submissions)),
+            masters.get(matched[p][0] or ""),
+            matched[p][1],
+            options,
+        )
+        for p in paths
     ]
     results: dict[int, GradeResult] = {}
     if jobs <= 1:
@@ -87,4 +111,6 @@ def grade_directory(
                 results[futures[future]] = future.result()
                 if progress:
                     progress(len(results), len(tasks), results[futures[future]])
-    return [results[i] for i in range(len(tasks))]
+    ordered = [results[i] for i in range(len(tasks))]
+    batch_flags(ordered)
+    return ordered

@@ -11,6 +11,7 @@ from typing import Any
 
 import nbformat
 
+from ._flags import handed_out_code
 from ._notebooks import notebooks, read_notebook
 from ._otter import assign, otter_tests
 
@@ -24,11 +25,17 @@ class Master:
     - `name`: the master's stem, e.g. `"02_bezier_curves"`.
     - `tests`: OK-format test specs by question (public and hidden cases), in question order.
     - `possible`: the points of each question.
+    - `init`: the source of the master's code cells before its first question (its imports
+      and the helpers its tests use), where the grader runs the tests (`Scorer`).
+    - `handed_out`: the code the student's notebook is given (`handed_out_code`), which
+      `submission_flags` does not scan.
     """
 
     name: str
     tests: dict[str, dict[str, Any]]
     possible: dict[str, float]
+    init: str = ""
+    handed_out: tuple[str, ...] = ()
 
     @property
     def questions(self) -> list[str]:
@@ -64,8 +71,29 @@ def load_master(path: Path) -> Master:
     with tempfile.TemporaryDirectory(prefix="diffnurbs-master-") as tmp:
         assigned = assign(Path(path), Path(tmp))
         tests = otter_tests(read_notebook(assigned.autograder))
+        handed_out = tuple(handed_out_code(read_notebook(assigned.student)))
     possible = {q: float(OKTestFile.from_spec(spec).possible) for q, spec in tests.items()}
-    return Master(Path(path).stem, tests, possible)
+    return Master(Path(path).stem, tests, possible, init_source(read_notebook(path)), handed_out)
+
+
+def init_source(nb: nbformat.NotebookNode) -> str:
+    """The code cells of a master before its first `# BEGIN QUESTION` cell, joined.
+
+    **Arguments:**
+
+    - `nb`: the master notebook.
+
+    **Returns:**
+
+    Their source, one cell after the other.
+    """
+    sources = []
+    for cell in nb.cells:
+        if cell.cell_type == "raw" and cell.source.lstrip().startswith("# BEGIN QUESTION"):
+            break
+        if cell.cell_type == "code":
+            sources.append(cell.source)
+    return "\n\n".join(sources)
 
 
 def load_masters(solutions: Path, names: Iterable[str] | None = None) -> dict[str, Master]:
@@ -104,8 +132,10 @@ def match_master(path: Path, nb: nbformat.NotebookNode | None, names: Iterable[s
     """
     names = set(names)
     if nb is not None:
-        assignment = nb.metadata.get("otter", {}).get("assignment_name")
-        if assignment in names:
+        otter = nb.metadata.get("otter")
+        # The metadata is the student's: any type may be there.
+        assignment = otter.get("assignment_name") if isinstance(otter, dict) else None
+        if isinstance(assignment, str) and assignment in names:
             return assignment
     if path.stem in names:
         return path.stem

@@ -11,6 +11,7 @@ from pathlib import Path
 from queue import Empty
 
 import nbformat
+from jupyter_client import KernelManager
 from nbclient import NotebookClient
 from nbclient.client import timestamp
 from nbclient.util import ensure_async
@@ -162,7 +163,13 @@ class PollingNotebookClient(NotebookClient):
 
 
 def make_client(
-    nb: nbformat.NotebookNode, cwd: Path, *, timeout: int | None, allow_errors: bool
+    nb: nbformat.NotebookNode,
+    cwd: Path,
+    *,
+    timeout: int | None,
+    allow_errors: bool,
+    km: KernelManager | None = None,
+    client_class: type[NotebookClient] | None = None,
 ) -> NotebookClient:
     """An nbclient client on the venv's kernel, working in `cwd`.
 
@@ -172,14 +179,17 @@ def make_client(
     - `cwd`: the kernel's working directory.
     - `timeout`: per-cell time limit in seconds (`None`: no limit).
     - `allow_errors`: whether to carry on after a cell raises.
+    - `km`: the kernel manager to start the kernel with (default: the venv's kernel, unconfined).
+    - `client_class`: a subclass of `PollingNotebookClient` to use instead of it.
 
     **Returns:**
 
     A `NotebookClient` that kills its kernel immediately when done.
     """
     use_headless_defaults()
-    return PollingNotebookClient(
+    return (client_class or PollingNotebookClient)(
         nb,
+        km=km,
         kernel_name=KERNEL_NAME,
         timeout=timeout,
         allow_errors=allow_errors,

@@ -1,4 +1,5 @@
-"""otter-grader's conventions as the course uses them: the assignment config, otter assign, tests.
+"""otter-grader's conventions as the course uses them: the assignment config, otter assign, tests,
+and otter's own autograder zip (for grading services such as Gradescope).
 
 The conventions are written down for chapter authors in `course/AUTHORING.md`.
 """
@@ -9,8 +10,12 @@ import contextlib
 import io
 import logging
 import re
+import shutil
+import sys
+import tempfile
 import warnings
 from dataclasses import dataclass
+from importlib.metadata import version
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +96,66 @@ def assign(master: Path, result: Path) -> Assigned:
     finally:
         otter_logger.setLevel(level)
     return Assigned(result / "student" / master.name, result / "autograder" / master.name)
+
+
+AUTOGRADER_SOURCE = "/autograder/source"
+"""Where a grading service (Gradescope) unpacks an autograder zip; its files are in `files/`."""
+
+
+def autograder_zip(master: Path, out_dir: Path, *, wheel: Path | None = None) -> Path:
+    """Build otter's own autograder zip of a master, for `otter run` or Gradescope.
+
+    otter assign runs on a copy of the master whose assignment config says `generate:`, so the
+    zip holds the same tests as `diffnurbs-grade` uses (hidden ones included), an
+    `environment.yml` for the venv's Python with `diffnurbs[course]` added to otter's
+    requirements, and otter's `setup.sh` / `run_autograder` for the grading service.
+
+    **Arguments:**
+
+    - `master`: a master notebook in `solutions/`.
+    - `out_dir`: the folder to write `<master stem>-autograder.zip` into (created if needed).
+    - `wheel`: a diffnurbs wheel to ship inside the zip and install from there; without it the
+        grading service installs `diffnurbs[course]` of this version from its package index.
+
+    **Returns:**
+
+    The zip's path.
+    """
+    master = Path(master).resolve()
+    if master.suffix != ".ipynb" or not master.is_file():
+        raise ValueError(f"master must be an existing .ipynb file, got {master}")
+    nb = nbformat.read(master, as_version=4)
+    header = "# ASSIGNMENT CONFIG\n"
+    if not nb.cells or not nb.cells[0].source.startswith(header):
+        raise ValueError(
+            f"{master.name}: the first cell must be the raw '# ASSIGNMENT CONFIG' cell"
+        )
+    config = yaml.safe_load(nb.cells[0].source[len(header) :])
+    requirement = f"diffnurbs[course]=={version('diffnurbs')}"
+    if wheel is not None:
+        wheel = Path(wheel).resolve()
+        if wheel.suffix != ".whl" or not wheel.name.startswith("diffnurbs-") or not wheel.is_file():
+            raise ValueError(f"wheel must be an existing diffnurbs-*.whl file, got {wheel}")
+        requirement = f"diffnurbs[course] @ file://{AUTOGRADER_SOURCE}/files/{wheel.name}"
+        config["autograder_files"] = [wheel.name]
+    config.update(
+        generate=True,
+        requirements=[requirement],
+        python_version=f"{sys.version_info.major}.{sys.version_info.minor}",
+    )
+    nb.cells[0].source = header + yaml.safe_dump(config, sort_keys=False).strip()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    target = out_dir / f"{master.stem}-autograder.zip"
+    with tempfile.TemporaryDirectory(prefix="diffnurbs-zip-") as tmp:
+        copy = Path(tmp) / master.name
+        nbformat.write(nb, copy)
+        if wheel is not None:
+            shutil.copyfile(wheel, Path(tmp) / wheel.name)
+        assign(copy, Path(tmp) / "dist")
+        (built,) = (Path(tmp) / "dist" / "autograder").glob("*.zip")
+        shutil.move(built, target)
+    return target
 
 
 def otter_tests(nb: nbformat.NotebookNode) -> dict[str, dict[str, Any]]:

@@ -1,4 +1,4 @@
-"""The scores table `file, q1, ..., total, max` and the progress line of a batch."""
+"""The scores table `file, q1, ..., total, max, flags` and the progress line of a batch."""
 
 from __future__ import annotations
 
@@ -22,7 +22,10 @@ def question_columns(results: Sequence[GradeResult]) -> list[str]:
 
 
 def write_csv(results: Sequence[GradeResult], path: Path) -> None:
-    """Write the scores table `file, q1, ..., total, max` (blank where a question does not apply).
+    """Write the scores table `file, q1, ..., total, max, flags`.
+
+    A question cell is blank where the question does not apply; `flags` holds the result's
+    flags joined by `"; "` (blank when there are none).
 
     **Arguments:**
 
@@ -32,15 +35,15 @@ def write_csv(results: Sequence[GradeResult], path: Path) -> None:
     questions = question_columns(results)
     with open(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.writer(f)
-        writer.writerow(["file", *questions, "total", "max"])
+        writer.writerow(["file", *questions, "total", "max", "flags"])
         for r in results:
             cells = [_number(r.scores[q]) if q in r.scores else "" for q in questions]
             maximum = _number(r.max_points) if r.master else ""
-            writer.writerow([r.file, *cells, _number(r.total), maximum])
+            writer.writerow([r.file, *cells, _number(r.total), maximum, "; ".join(r.flags)])
 
 
 def print_progress(done: int, total: int, result: GradeResult) -> None:
-    """Print one line per graded notebook: `[3/40] file: 7.5/10 (21 s)  [notes]`.
+    """Print one line per graded notebook: `[3/40] file: 7.5/10 (21 s) 2 flags  [notes]`.
 
     **Arguments:**
 
@@ -48,5 +51,8 @@ def print_progress(done: int, total: int, result: GradeResult) -> None:
     - `result`: the notebook just graded.
     """
     score = f"{_number(result.total)}/{_number(result.max_points)}" if result.master else "-"
+    count = len(result.flags)
+    flags = f" {count} flag{'s' if count > 1 else ''}" if count else ""
     notes = f"  [{'; '.join(result.notes)}]" if result.notes else ""
-    print(f"[{done}/{total}] {result.file}: {score} ({result.seconds:.0f} s){notes}", flush=True)
+    line = f"[{done}/{total}] {result.file}: {score} ({result.seconds:.0f} s){flags}{notes}"
+    print(line, flush=True)

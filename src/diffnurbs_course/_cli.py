@@ -59,43 +59,19 @@ def _parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--jobs", type=int, default=1, help="notebooks graded at once (default 1)")
     times = parser.add_argument_group("time limits (seconds)")
-    times.add_argument(
-        "--timeout",
-        type=float,
-        default=DEFAULT_TIMEOUT,
-        help=f"a notebook's cells all together (default {DEFAULT_TIMEOUT})",
-    )
-    times.add_argument(
-        "--cell-timeout",
-        type=float,
-        default=CELL_TIMEOUT,
-        help=f"one cell, which is then interrupted and skipped (default {CELL_TIMEOUT})",
-    )
-    times.add_argument(
-        "--check-timeout",
-        type=float,
-        default=CHECK_TIMEOUT,
-        help=f"the tests of one question (default {CHECK_TIMEOUT})",
-    )
+    limits = [
+        (times, "--timeout", float, DEFAULT_TIMEOUT, "a notebook's cells all together"),
+        (times, "--cell-timeout", float, CELL_TIMEOUT, "one cell, then interrupted and skipped"),
+        (times, "--check-timeout", float, CHECK_TIMEOUT, "the tests of one question"),
+    ]
     sandbox = parser.add_argument_group("sandbox")
-    sandbox.add_argument(
-        "--memory-mb",
-        type=int,
-        default=SANDBOX_LIMITS.memory_mb,
-        help=f"address space of each process, MiB (default {SANDBOX_LIMITS.memory_mb})",
-    )
-    sandbox.add_argument(
-        "--max-processes",
-        type=int,
-        default=SANDBOX_LIMITS.processes,
-        help=f"tasks in a sandbox, threads included (default {SANDBOX_LIMITS.processes})",
-    )
-    sandbox.add_argument(
-        "--file-mb",
-        type=int,
-        default=SANDBOX_LIMITS.file_mb,
-        help=f"largest file, and the size of /tmp, MiB (default {SANDBOX_LIMITS.file_mb})",
-    )
+    limits += [
+        (sandbox, "--memory-mb", int, SANDBOX_LIMITS.memory_mb, "address space per process, MiB"),
+        (sandbox, "--max-processes", int, SANDBOX_LIMITS.processes, "tasks, threads included"),
+        (sandbox, "--file-mb", int, SANDBOX_LIMITS.file_mb, "largest file, and /tmp's size, MiB"),
+    ]
+    for group, flag, kind, default, what in limits:
+        group.add_argument(flag, type=kind, default=default, help=f"{what} (default {default})")
     sandbox.add_argument(
         "--no-sandbox",
         action="store_true",

@@ -104,3 +104,17 @@ def test_blank_exercise_scores_zero(path, tmp_path_factory):
     result = graded_exercise(path, shared_dir(tmp_path_factory))
     passed = [q for q, s in result.scores.items() if s > 0]
     assert result.total == 0, f"blank answers pass {passed}: the tests do not test the answer"
+
+
+def test_without_a_sandbox_the_grader_refuses_unless_told(tmp_path, monkeypatch, capsys):
+    (tmp_path / "submissions").mkdir()
+    shutil.copyfile(DEMO_MASTER, tmp_path / "submissions" / DEMO_MASTER.name)
+    monkeypatch.setenv("PATH", str(tmp_path))  # no bwrap on it
+    argv = [str(tmp_path / "submissions"), "-o", str(tmp_path / "s.csv")]
+    argv += ["--solutions", str(DEMO_MASTER.parent)]
+    assert dc.main(argv) == 2
+    error = capsys.readouterr().err
+    assert "no sandbox on this machine" in error and "bubblewrap" in error, error
+    assert "--no-sandbox" in error and not (tmp_path / "s.csv").exists()
+    rows = _grade(tmp_path, "--no-sandbox")
+    assert _scores(rows[DEMO_MASTER.name]) == (2, 3, 5, 5)

@@ -237,8 +237,7 @@ class _Session:
         self.check_timeout = check_timeout
         self.deadline = time.monotonic() + timeout
         self.timeout = timeout
-        self.done: list[int] = []
-        self.skipped: set[int] = set()
+        self.done: list[int] = []  # the cells run to the end in the current kernel
         self.restarts = 0
         self.notes: list[str] = []
         self.kc = None
@@ -273,7 +272,6 @@ class _Session:
             if self.run.run(index, limit):
                 self.done.append(index)
                 continue
-            self.skipped.add(index)
             where = f"code cell {index + 1}"
             if self.run.alive and self.run.responsive():
                 self.notes.append(f"{where} was stopped after {limit:.0f} s and skipped")

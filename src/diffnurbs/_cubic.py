@@ -16,6 +16,9 @@ Every curve uses the uniform parameter: segment `k` is the piece on `[k, k + 1]`
 `t = u - k`, so its derivatives in `u` are the matrix form's derivatives in `t`.
 """
 
+import functools
+
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float
@@ -121,9 +124,18 @@ def _as_points(points: ArrayLike, minimum: int, what: str) -> Array:
 def _piecewise_bezier(starts, inner1, inner2, last, dtype) -> NURBSCurve:
     """One C0-knotted cubic B-spline from Bezier segments `(starts[k], inner1[k], inner2[k],
     starts[k + 1] or last)`, segment `k` on `[k, k + 1]`."""
-    count = starts.shape[0]
-    points = jnp.stack([starts, inner1, inner2], axis=1).reshape(3 * count, -1)
-    points = jnp.concatenate([points, last[None]], axis=0)
+    return _bezier_chain(_bezier_net(starts, inner1, inner2, last), dtype)
+
+
+def _bezier_net(starts, inner1, inner2, last):
+    """The control points of `_piecewise_bezier`, `3 count + 1` rows."""
+    points = jnp.stack([starts, inner1, inner2], axis=1).reshape(3 * starts.shape[0], -1)
+    return jnp.concatenate([points, last[None]], axis=0)
+
+
+def _bezier_chain(points, dtype) -> NURBSCurve:
+    """The cubic `NURBSCurve` on the control points of `_bezier_net`."""
+    count = (points.shape[0] - 1) // 3
     # Triple interior knots: each segment is its own Bezier piece, joined with C0 by the
     # knots and C1 by the construction (shared end tangents).
     knots = np.concatenate([[0.0], np.repeat(np.arange(count + 1.0), 3), [float(count)]])
@@ -190,6 +202,12 @@ def cardinal_spline(
     value = concrete(tension)
     if value is not None and not np.isfinite(value):
         raise ValueError(f"tension must be finite, got {value}")
+    return _bezier_chain(_cardinal_net(points, tension, closed), points.dtype)
+
+
+@functools.partial(jax.jit, static_argnums=2)
+def _cardinal_net(points, tension, closed):
+    """The control points of `cardinal_spline`, as one compiled program."""
     scale = (1 - tension) / 2
     if closed:
         tangents = scale * (jnp.roll(points, -1, axis=0) - jnp.roll(points, 1, axis=0))
@@ -205,9 +223,7 @@ def cardinal_spline(
         )
         starts, start_tangents = points[:-1], tangents[:-1]
         ends, end_tangents, last = points[1:], tangents[1:], points[-1]
-    return _piecewise_bezier(
-        starts, starts + start_tangents / 3, ends - end_tangents / 3, last, points.dtype
-    )
+    return _bezier_net(starts, starts + start_tangents / 3, ends - end_tangents / 3, last)
 
 
 def catmull_rom(points: ArrayLike, closed: bool = False) -> NURBSCurve:

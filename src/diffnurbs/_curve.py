@@ -32,6 +32,7 @@ from ._validate import (
     check_rank,
     check_weights,
     concrete,
+    domain_ends,
     float_dtype,
 )
 
@@ -89,7 +90,7 @@ class NURBSCurve(AbstractRationalSpline):
     @property
     def domain(self) -> tuple[Array, Array]:
         """`(knots[p], knots[n_control])`, the parameter interval."""
-        return self.knots[self.degree], self.knots[-self.degree - 1]
+        return domain_ends(self.knots, self.degree)
 
     def _from_homogeneous_points(
         self, points: Array, knots: Array, degree: int | None = None
@@ -316,7 +317,11 @@ class NURBSCurve(AbstractRationalSpline):
 
     def tangent(self, u: ArrayLike) -> Float[Array, "... dim"]:
         """Unit tangent `C'(u) / |C'(u)|`; zero where the curve has zero speed."""
-        return safe_normalize(self.derivatives(u, 1)[..., 1, :])
+        return self._tangent(self._parameters(u))
+
+    @eqx.filter_jit
+    def _tangent(self, u: Array) -> Array:
+        return safe_normalize(self._derivatives(u, 1)[..., 1, :])
 
     def curvature(self, u: ArrayLike) -> Float[Array, "..."]:
         """Curvature: signed `(x'y'' - y'x'') / |C'|^3` in 2D, `|C' x C''| / |C'|^3` otherwise.
@@ -325,7 +330,11 @@ class NURBSCurve(AbstractRationalSpline):
         """
         if self.dim < 2:
             raise ValueError(f"curvature needs a curve of dimension >= 2, got dim = {self.dim}")
-        ders = self.derivatives(u, 2)
+        return self._curvature(self._parameters(u))
+
+    @eqx.filter_jit
+    def _curvature(self, u: Array) -> Array:
+        ders = self._derivatives(u, 2)
         d1, d2 = ders[..., 1, :], ders[..., 2, :]
         if self.dim == 2:
             bend = d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0]

@@ -102,6 +102,7 @@ def double_reflection(x0: Array, t0: Array, r0: Array, x1: Array, t1: Array) -> 
     return jnp.where(short, turned, reflected)
 
 
+@eqx.filter_jit
 def _frenet(path: NURBSCurve, v: Array) -> Array:
     ders = path.derivatives(v, 2)
     d1, d2 = ders[..., 1, :], ders[..., 2, :]

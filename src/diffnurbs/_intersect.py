@@ -15,6 +15,7 @@ search, whose derivative is the implicit-function one: `jax.grad` reaches the co
 weights and knots of both curves.
 """
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -317,8 +318,14 @@ def newton_to_rounding(step, params, domains):
 def polish(c1, c2, u1, u2):
     """One Newton step at the intersections `(u1, u2)`, whose derivative is the implicit-
     function one (the values move only by rounding at a true intersection)."""
+    # The parameter checks of `derivatives` stay eager; the step is one compiled program.
+    return _newton_step(c1, c2, c1._parameters(u1), c2._parameters(u2))
+
+
+@eqx.filter_jit
+def _newton_step(c1, c2, u1, u2):
     fixed = jax.lax.stop_gradient((u1, u2))
-    d1, d2 = c1.derivatives(fixed[0], 1), c2.derivatives(fixed[1], 1)
+    d1, d2 = c1._derivatives(fixed[0], 1), c2._derivatives(fixed[1], 1)
     gap = d1[:, 0] - d2[:, 0]
     jacobian = jnp.stack([d1[:, 1], -d2[:, 1]], axis=-1)  # (count, dim, 2)
     step = jnp.linalg.pinv(jacobian) @ gap[..., None]

@@ -30,11 +30,22 @@ def clamped_knots(
     degree = check_degree(degree)
     check_control_count(n_control, degree)
     a, b = domain
-    interior = jnp.linspace(0.0, 1.0, n_control - degree + 1, dtype=dtype)
-    knots = jnp.concatenate(
-        [jnp.zeros(degree, dtype=interior.dtype), interior, jnp.ones(degree, dtype=interior.dtype)]
-    )
-    return a + (b - a) * knots
+    dtype = jax.dtypes.canonicalize_dtype(float if dtype is None else dtype)
+    if dtype not in (np.float32, np.float64):
+        interior = jnp.linspace(0.0, 1.0, n_control - degree + 1, dtype=dtype)
+        ones, zeros = jnp.ones(degree, dtype), jnp.zeros(degree, dtype)
+        return a + (b - a) * jnp.concatenate([zeros, interior, ones])
+    # In NumPy: the counts are Python ints, and eager `jnp` operations (`jnp.asarray` of a
+    # NumPy array too, unlike `device_put`) would compile a program per knot count.
+    # `i * (1 / div)` is what `jnp.linspace` computes (XLA turns its division by a
+    # constant into this product), so the knots are the same to the bit.
+    div = n_control - degree
+    interior = np.arange(div, dtype=dtype) * (np.ones((), dtype) / np.asarray(div, dtype))
+    knots = np.concatenate([np.zeros(degree, dtype), interior, np.ones(degree + 1, dtype)])
+    if all(type(x) in (int, float) for x in (a, b)):
+        # Python scalars are weakly typed: they take the knots' dtype, in NumPy as in JAX.
+        return jax.device_put(a + (b - a) * knots)
+    return a + (b - a) * jax.device_put(knots)
 
 
 PARAMETRIZATIONS = ("uniform", "chord", "centripetal")

@@ -5,6 +5,7 @@ In every result `u` runs along the profile curve and `v` along the motion.
 
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
@@ -23,10 +24,18 @@ def _unit_vector(vector, name, dim):
             f"{name} must be a vector of length {dim} (the curve's dimension), "
             f"got shape {vector.shape}"
         )
-    length = concrete(safe_norm(vector))
+    length, unit = _normalized(vector)
+    length = concrete(length)
     if length is not None and not length > 0:
         raise ValueError(f"{name} must be non-zero, got {np.asarray(vector).tolist()}")
-    return vector / safe_norm(vector)
+    return unit
+
+
+@jax.jit
+def _normalized(vector):
+    """`(|v|, v / |v|)` as one compiled program."""
+    length = safe_norm(vector)
+    return length, vector / length
 
 
 def _profile_weights(curve):
@@ -88,6 +97,14 @@ def revolve(
     if origin.shape != (3,):
         raise ValueError(f"axis_point must be a point in 3D, got shape {origin.shape}")
     planar, arc_weights, knots_v = arc_net(0.0, angle)
+    points, weights = _revolved_net(curve, origin, axis, planar, arc_weights)
+    knots = (curve.knots, knots_v.astype(curve.knots.dtype))
+    return NURBSSurface(points, (curve.degree, 2), knots, weights)
+
+
+@jax.jit
+def _revolved_net(curve, origin, axis, planar, arc_weights):
+    """The control points and weights of `revolve`, as one compiled program."""
     offset = curve.control_points - origin
     foot = origin + (offset @ axis)[:, None] * axis  # projection of each point on the axis
     radial = curve.control_points - foot  # zero for points on the axis: they stay put
@@ -97,9 +114,7 @@ def revolve(
         + planar[None, :, 0, None] * radial[:, None, :]
         + planar[None, :, 1, None] * across[:, None, :]
     )
-    weights = _profile_weights(curve)[:, None] * arc_weights[None, :]
-    knots = (curve.knots, knots_v.astype(curve.knots.dtype))
-    return NURBSSurface(points, (curve.degree, 2), knots, weights)
+    return points, _profile_weights(curve)[:, None] * arc_weights[None, :]
 
 
 def sweep(profile: NURBSCurve, path: NURBSCurve) -> NURBSSurface:

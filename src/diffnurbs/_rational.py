@@ -8,6 +8,7 @@ NURBS Book A4.2 and A4.4) without differentiating a quotient.
 import math
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, ArrayLike, Float
 
@@ -24,7 +25,13 @@ def to_homogeneous(points: ArrayLike, weights: ArrayLike) -> Float[Array, "... d
 
     Array of shape `(..., dim + 1)`.
     """
-    points, weights = jnp.asarray(points), jnp.asarray(weights)
+    return _to_homogeneous(jnp.asarray(points), jnp.asarray(weights))
+
+
+# Compiled as one program: eagerly, each operation would compile on its own for every
+# shape of control net.
+@jax.jit
+def _to_homogeneous(points, weights):
     return jnp.concatenate([points * weights[..., None], weights[..., None]], axis=-1)
 
 
@@ -39,7 +46,11 @@ def from_homogeneous(points: ArrayLike) -> Float[Array, "... dim"]:
 
     Array of shape `(..., dim)`.
     """
-    points = jnp.asarray(points)
+    return _from_homogeneous(jnp.asarray(points))
+
+
+@jax.jit
+def _from_homogeneous(points):
     return points[..., :-1] / points[..., -1:]
 
 

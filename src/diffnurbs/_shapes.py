@@ -1,7 +1,9 @@
 """Exact conics as rational quadratic NURBS: circles, circular arcs, ellipses."""
 
+import functools
 import math
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import ArrayLike
@@ -55,9 +57,16 @@ def arc(
     if radius_value is not None and not (np.isfinite(radius_value) and radius_value > 0):
         raise ValueError(f"radius must be finite and positive, got {radius_value}")
     sweep = jnp.asarray(end_angle, center.dtype) - jnp.asarray(start_angle, center.dtype)
-    planar, weights, knots = arc_net(start_angle, sweep, segments)
-    points = center + jnp.pad(radius * planar, ((0, 0), (0, center.shape[0] - 2)))
-    return NURBSCurve(points, 2, knots.astype(center.dtype), weights)
+    count = _arc_segments(sweep, segments)
+    points, weights = _arc_points(radius, start_angle, sweep, center, count)
+    return NURBSCurve(points, 2, _arc_knots(count, center.dtype), weights)
+
+
+@functools.partial(jax.jit, static_argnums=4)
+def _arc_points(radius, start_angle, sweep, center, count):
+    """The control points and weights of `arc` as one compiled program per segment count."""
+    planar, weights = _arc_net(start_angle, sweep, count)
+    return center + jnp.pad(radius * planar, ((0, 0), (0, center.shape[0] - 2))), weights
 
 
 def arc_net(start_angle, sweep, segments=None):
@@ -74,16 +83,28 @@ def arc_net(start_angle, sweep, segments=None):
     origin, their `2 s + 1` weights, and the `2 s + 4` knots on [0, 1].
     """
     count = _arc_segments(sweep, segments)
+    return *_jit_arc_net(start_angle, sweep, count), _arc_knots(count)
+
+
+def _arc_net(start_angle, sweep, count):
     half = jnp.asarray(sweep) / (2 * count)
     odd = np.arange(2 * count + 1) % 2 == 1
     angles = start_angle + half * np.arange(2 * count + 1)
     # The middle point of a segment is where its end tangents meet: at 1 / cos(half).
     distance = jnp.where(odd, 1.0 / jnp.cos(half), 1.0)
     points = distance[:, None] * jnp.stack([jnp.cos(angles), jnp.sin(angles)], axis=-1)
-    weights = jnp.where(odd, jnp.cos(half), 1.0)
+    return points, jnp.where(odd, jnp.cos(half), 1.0)
+
+
+_jit_arc_net = jax.jit(_arc_net, static_argnums=2)
+
+
+def _arc_knots(count, dtype=None):
+    """The `2 count + 4` knots of an arc of `count` segments, built in NumPy: a count is a
+    Python int, and eager `jnp` operations would compile a program for each."""
     interior = np.repeat(np.arange(1, count) / count, 2)
-    knots = jnp.asarray(np.concatenate([[0.0] * 3, interior, [1.0] * 3]))
-    return points, weights, knots
+    knots = np.concatenate([[0.0] * 3, interior, [1.0] * 3])
+    return jax.device_put(knots.astype(jax.dtypes.canonicalize_dtype(dtype or float)))
 
 
 def circle(radius: ArrayLike, center: ArrayLike = (0.0, 0.0)) -> NURBSCurve:

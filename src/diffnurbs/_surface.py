@@ -35,6 +35,7 @@ from ._validate import (
     check_rank,
     check_weights,
     concrete,
+    domain_ends,
     float_dtype,
 )
 
@@ -143,7 +144,11 @@ class AbstractSurface(eqx.Module):
         """
         if self.dim != 3:
             raise ValueError(f"normal needs a surface in 3D, got dim = {self.dim}")
-        ders = self.derivatives(u, v, 1)
+        return self._normal(*jnp.broadcast_arrays(*self._parameters(u, v)))
+
+    @eqx.filter_jit
+    def _normal(self, u: Array, v: Array) -> Array:
+        ders = self._derivatives(u, v, 1)
         s_u, s_v = ders[..., 1, 0, :], ders[..., 0, 1, :]
         cross = jnp.cross(s_u, s_v)
         scale = jnp.sum(s_u * s_u, -1) + jnp.sum(s_v * s_v, -1)
@@ -309,7 +314,7 @@ class NURBSSurface(AbstractRationalSpline, AbstractSurface):
     def domain(self) -> tuple[tuple[Array, Array], tuple[Array, Array]]:
         """`((u_min, u_max), (v_min, v_max))`."""
         p, q = self.degree
-        return (self.knots_u[p], self.knots_u[-p - 1]), (self.knots_v[q], self.knots_v[-q - 1])
+        return domain_ends(self.knots_u, p), domain_ends(self.knots_v, q)
 
     def _from_homogeneous_points(self, points, knots_u, knots_v, degree=None) -> "NURBSSurface":
         """A surface of the same kind (and degrees, unless given) from homogeneous points."""

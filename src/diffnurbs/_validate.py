@@ -132,6 +132,18 @@ def check_control_count(count, degree, name="control points", at_most=None, sour
         raise ValueError(f"expected at most {at_most} {name} (the number of {source}), got {count}")
 
 
+def domain_ends(knots, degree):
+    """`(knots[p], knots[-p - 1])`, the ends of a spline's domain, as 0-d arrays.
+
+    Concrete knots are read in NumPy: eager indexing would compile a program for every
+    length of knot vector, and the domain is read on every evaluation.
+    """
+    values = concrete(knots)
+    if values is None:
+        return knots[degree], knots[-degree - 1]
+    return jax.device_put(values[degree]), jax.device_put(values[-degree - 1])
+
+
 def check_parameter(u, lower, upper, name="u"):
     """Raise for concrete parameters outside `[lower, upper]`, naming the first one and
     the domain; traced ones pass. A few units of rounding beyond an end are not an error

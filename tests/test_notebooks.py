@@ -64,8 +64,8 @@ def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
     **Arguments:**
 
     - `exercise`: the student notebook.
-    - `errors`: `GradeResult.errors` of its grading run (cell 0 is the grading set-up, then the
-      notebook's code cells in order, then one check cell per question).
+    - `errors`: `GradeResult.errors` of its grading run (indexed by the notebook's code cells;
+      the grader runs those alone, its tests run outside the kernel).
 
     **Returns:**
 
@@ -73,12 +73,12 @@ def forbidden_errors(exercise: Path, errors: list[dict]) -> list[str]:
     """
     code = [c for c in dc.read_notebook(exercise).cells if c.cell_type == "code"]
     tags = [cell.metadata.get("tags", []) for cell in code]
-    answers = [i for i, cell_tags in enumerate(tags, start=1) if dc.ANSWER_TAG in cell_tags]
-    first_answer = answers[0] if answers else len(code) + 1
+    answers = [i for i, cell_tags in enumerate(tags) if dc.ANSWER_TAG in cell_tags]
+    first_answer = answers[0] if answers else len(code)
     bad = []
     for error in errors:
         index, source = error["index"], error["source"]
-        setup = index == 0 or index > len(code) or "grader = Notebook(" in source
+        setup = "grader = Notebook(" in source
         check = source.lstrip().startswith("grader.check(")
         if setup or check or index < first_answer:
             bad.append(_describe(error))

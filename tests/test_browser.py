@@ -14,6 +14,7 @@ import pytest
 from browser import (
     BROWSER_OUT,
     CHROMIUM_ARGS,
+    POLL_MS,
     ROOT,
     chromium_path,
     drag,
@@ -22,6 +23,7 @@ from browser import (
     run_all,
     save,
     settled_view,
+    shut_down_kernel,
     wait_for_idle_kernel,
 )
 from notebook_runs import COURSE, record_time, shared_dir
@@ -57,6 +59,7 @@ def lab(tmp_path_factory):
             # A workspace of its own, reset: only this notebook is open.
             workspace = Path(name).stem
             page.goto(f"{url}/lab/workspaces/{workspace}/tree/{name}?reset&token={token}")
+            page.on("close", lambda _: shut_down_kernel(url, token, name))
             return page
 
         yield open_notebook, root
@@ -217,6 +220,7 @@ def _answers(page, control) -> None:
         "cell => cell.querySelector('.jp-OutputArea-output img, .dn-editor, .dn-view')",
         arg=cell.element_handle(),
         timeout=60_000,
+        polling=POLL_MS,
     )
     before = _drawings(cell)
     _change(page, control)
@@ -254,7 +258,10 @@ def test_chapter_runs_and_its_widgets_answer(lab, chapter, tmp_path_factory):
         # One second of dragging at 60 pointer events per second.
         drag(page, editor.locator(".dn-point").nth(1), 30, -30, steps=60, pause_ms=16)
         page.wait_for_function(
-            "e => e.dataset.pending === '0'", arg=editor.element_handle(), timeout=60_000
+            "e => e.dataset.pending === '0'",
+            arg=editor.element_handle(),
+            timeout=60_000,
+            polling=POLL_MS,
         )
         editor.screenshot(path=BROWSER_OUT / f"{chapter.stem}_editor{index}.png")
         assert _drawn_lines(editor) != before

@@ -117,7 +117,7 @@ function render({ model, el }) {
   const marker = node("path", { d: "M0,24 l-7,12 l14,0 z", class: "dn-marker" }, strip);
   const panel = node("g", { transform: `translate(0, ${HEIGHT + STRIP})`, class: "dn-panel" }, svg);
 
-  // --- view: world box fixed while dragging, refitted when a point leaves it ------------
+  // --- view: fitted to a curve from Python, fixed while editing (a dragged point stays in it)
   let box = null;
   function fit(points) {
     const xs = points.map((p) => p[0]);

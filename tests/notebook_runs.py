@@ -39,6 +39,12 @@ COURSE = dc.notebooks(LAYOUT.course)
 them, and checks the saved notebook; they are not also run headless."""
 
 
+COMPILE_CACHE = Path(os.environ["JAX_COMPILATION_CACHE_DIR"])
+"""The suite's JAX compilation cache (conftest.py), shared with the sandboxed kernels of the
+course's own masters and exercises: trusted notebooks, which otherwise compile cold."""
+COMPILE_CACHE.mkdir(parents=True, exist_ok=True)
+
+
 def shared_dir(tmp_path_factory) -> Path:
     """A folder shared by every worker of this pytest run (and only this run).
 
@@ -90,7 +96,11 @@ def graded(path: Path, master: Path, shared: Path) -> dc.GradeResult:
         if cache.exists():
             return dc.GradeResult.from_json(json.loads(cache.read_text()))
         result = dc.grade_notebook(
-            path, dc.load_master(master), timeout=GRADING_TIMEOUT, label=str(path)
+            path,
+            dc.load_master(master),
+            timeout=GRADING_TIMEOUT,
+            label=str(path),
+            compile_cache=COMPILE_CACHE,
         )
         result.executed = None
         cache.write_text(json.dumps(result.to_json()))

@@ -37,8 +37,8 @@ SECRET = f"grader-secret-{uuid.uuid4().hex}"
 class Sandbox:
     """A started sandboxed kernel with a blocking client."""
 
-    def __init__(self, scratch, limits=None):
-        self.km = SandboxKernelManager(scratch, limits or SandboxLimits())
+    def __init__(self, scratch, limits=None, **options):
+        self.km = SandboxKernelManager(scratch, limits or SandboxLimits(), **options)
         self.km.start_kernel()
         self.connect()
 
@@ -257,6 +257,26 @@ def test_environment_is_cleared(sandbox):
     assert inside.get("XLA_FLAGS") == os.environ.get("XLA_FLAGS")
     assert set(inside) <= SANDBOX_VARIABLES, set(inside) - SANDBOX_VARIABLES
     assert inside["HOME"] == "/scratch" and sandbox.value("__import__('os').getcwd()") == "/scratch"
+
+
+def test_a_trusted_kernel_shares_a_compile_cache(tmp_path):
+    (tmp_path / "scratch").mkdir()
+    (tmp_path / "cache").mkdir()
+    box = Sandbox(tmp_path / "scratch", compile_cache=tmp_path / "cache")
+    try:
+        program = "import jax, jax.numpy as jnp; print(float(jax.jit(lambda x: 3 * x + 1)(2.0)))"
+        assert box.run(program) == ("ok", "7.0\n", None)
+        assert box.value("__import__('os').environ['JAX_COMPILATION_CACHE_DIR']") == str(
+            (tmp_path / "cache").resolve()
+        )
+    finally:
+        box.close()
+    # What the kernel compiled is on the host, for the next trusted kernel to load.
+    assert any((tmp_path / "cache").iterdir())
+    with pytest.raises(ValueError, match=r"compile_cache .* overlaps"):
+        SandboxKernelManager(tmp_path, compile_cache=tmp_path / "cache")
+    with pytest.raises(ValueError, match="compile_cache must be an existing folder"):
+        SandboxKernelManager(tmp_path / "scratch", compile_cache=tmp_path / "missing")
 
 
 def test_memory_beyond_the_limit_fails_inside(sandbox):

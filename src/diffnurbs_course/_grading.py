@@ -360,6 +360,7 @@ def grade_notebook(
     check_timeout: float = CHECK_TIMEOUT,
     limits: SandboxLimits | None = SANDBOX_LIMITS,
     label: str | None = None,
+    compile_cache: Path | None = None,
 ) -> GradeResult:
     """Grade one submitted notebook against its master.
 
@@ -373,6 +374,8 @@ def grade_notebook(
     - `limits`: the sandbox's limits; `None` runs the kernel unconfined, with the grader's
       privileges (only for trusted notebooks, e.g. the masters).
     - `label`: the name used in the CSV (default: `path`).
+    - `compile_cache`: a JAX compilation cache folder the sandboxed kernel reads and writes,
+      shared with other runs; only for trusted notebooks (see `SandboxKernelManager`).
 
     **Returns:**
 
@@ -392,7 +395,9 @@ def grade_notebook(
         scratch = Path(tmp) / "scratch"
         scratch.mkdir()
         shutil.copyfile(path, scratch / f"{master.name}.ipynb")  # `grader.check` reads it
-        km = None if limits is None else AsyncSandboxKernelManager(scratch, limits)
+        km = None
+        if limits is not None:
+            km = AsyncSandboxKernelManager(scratch, limits, compile_cache=compile_cache)
         client = make_client(
             run_nb,
             scratch,

@@ -193,7 +193,13 @@ def _process_limit_problem() -> str | None:
 
 
 def _sandbox_args(
-    bwrap: str, scratch: Path, connection: Path | None, limits: SandboxLimits, *, nproc: bool
+    bwrap: str,
+    scratch: Path,
+    connection: Path | None,
+    limits: SandboxLimits,
+    *,
+    nproc: bool,
+    compile_cache: Path | None = None,
 ) -> list[str]:
     """The bwrap command line up to the command: namespaces, mounts, environment, limits.
 
@@ -205,6 +211,8 @@ def _sandbox_args(
       the folder `ipc` of its sockets, seen read-write (None: no kernel).
     - `limits`: the limits to apply.
     - `nproc`: whether to limit processes with RLIMIT_NPROC (else a cgroup does).
+    - `compile_cache`: a JAX compilation cache folder seen read-write at the same path, or
+      None.
 
     **Returns:**
 
@@ -230,6 +238,8 @@ def _sandbox_args(
     # After the private /tmp, which would hide an environment that lives under /tmp.
     for path in _python_paths():
         args += ["--ro-bind", str(path), str(path)]
+    if compile_cache is not None:
+        args += ["--bind", str(compile_cache), str(compile_cache)]
     if connection is not None:
         ipc = connection.parent / "ipc"
         args += ["--bind", str(ipc), str(ipc), "--ro-bind", str(connection), str(connection)]
@@ -261,6 +271,11 @@ def _sandbox_args(
     # test suite's fast flags, for instance): the one variable passed through.
     if "XLA_FLAGS" in os.environ:
         env["XLA_FLAGS"] = os.environ["XLA_FLAGS"]
+    if compile_cache is not None:
+        env["JAX_COMPILATION_CACHE_DIR"] = str(compile_cache)
+        # Every program, however quick to compile: a notebook's eager JAX code dispatches
+        # hundreds of small ones, which the next kernel would otherwise compile again.
+        env["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
     for key, value in env.items():
         args += ["--setenv", key, value]
     rlimits = [
@@ -332,7 +347,14 @@ def _remove_cgroup(cgroup: Path) -> None:
 class _Sandboxed:
     """The sandbox of the two kernel managers below (they differ in their public methods)."""
 
-    def __init__(self, scratch: Path, limits: SandboxLimits = SandboxLimits(), **kwargs: Any):
+    def __init__(
+        self,
+        scratch: Path,
+        limits: SandboxLimits = SandboxLimits(),
+        *,
+        compile_cache: Path | None = None,
+        **kwargs: Any,
+    ):
         kernel_name = kwargs.setdefault("kernel_name", KERNEL_NAME)
         if kernel_name != KERNEL_NAME:
             raise ValueError(f"kernel_name must be {KERNEL_NAME!r}, got {kernel_name!r}")
@@ -355,12 +377,23 @@ class _Sandboxed:
             )
         if not isinstance(limits, SandboxLimits):
             raise ValueError(f"limits must be a SandboxLimits, got {type(limits).__name__}")
+        if compile_cache is not None:
+            compile_cache = Path(compile_cache)
+            if not compile_cache.is_dir():
+                raise ValueError(f"compile_cache must be an existing folder, got {compile_cache}")
+            compile_cache = compile_cache.resolve()
+            if compile_cache.is_relative_to(scratch) or scratch.is_relative_to(compile_cache):
+                raise ValueError(
+                    f"compile_cache {compile_cache} overlaps the scratch folder {scratch}; "
+                    "expected a folder of its own"
+                )
         bwrap = _bwrap()
         if bwrap is None:
             raise RuntimeError(_NO_BWRAP)
         super().__init__(transport="ipc", **kwargs)
         self.scratch = scratch
         self.limits = limits
+        self.compile_cache = compile_cache
         self._bwrap_path = bwrap
         self._cgroup_home = _pids_cgroup_home()
         if self._cgroup_home is None and os.geteuid() == 0:
@@ -406,6 +439,7 @@ class _Sandboxed:
             Path(self.connection_file),
             self.limits,
             nproc=self._cgroup_home is None,
+            compile_cache=self.compile_cache,
         )
         command = [*args, *kernel_cmd]
         # bwrap needs no variables; its init, PID 1 in the sandbox, keeps the environment it
@@ -447,6 +481,9 @@ class SandboxKernelManager(_Sandboxed, KernelManager):
     - `scratch`: an existing folder for this submission alone: the kernel can read, write
       and delete everything in it.
     - `limits`: resource limits.
+    - `compile_cache`: a folder the kernel uses, read-write, as its JAX compilation cache
+      (None: none). Only for trusted notebooks, such as the course's own masters in its
+      tests: a submission could plant programs there that later kernels would load and run.
     - `**kwargs`: passed to `KernelManager` (`kernel_name`, if given, must be `python3`).
 
     **Raises:**

@@ -3,8 +3,9 @@
     python tools/export_figures.py course/07_bspline_surfaces.ipynb [...] [--out build/figures]
 
 Writes `<out>/<chapter>/cell<NN>_<k>.png` (NN: the cell's index in the notebook) and
-`<out>/<chapter>/outputs.md`, the chapter's text outputs in order with warnings and errors
-marked, to read every sentence against what the chapter prints.
+`<out>/<chapter>/outputs.md`, the chapter's text outputs in order (Markdown outputs, such as
+tables, as their Markdown) with warnings and errors marked, to read every sentence against what
+the chapter prints.
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ def export(path: Path, out: Path) -> list[str]:
                     problems.append(f"cell {index}: stderr: {output.text.strip()[:200]}")
                     lines.append("**STDERR**")
                 lines.append(output.text.rstrip())
+            elif "text/markdown" in data:
+                lines.append(data["text/markdown"].rstrip())
             elif "text/plain" in data and "image/png" not in data:
                 lines.append(data["text/plain"].rstrip())
         lines.append("")

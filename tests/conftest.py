@@ -32,6 +32,18 @@ jax.config.update("jax_enable_x64", True)
 use_headless_defaults()
 
 
+def pytest_collection_modifyitems(items):
+    """Run the hostile batch's tests first.
+
+    They share one graded batch, made by the first of them behind a lock (`test_hostile.py`);
+    under xdist a worker that meets one while the other worker grades the batch waits idle
+    (61 s in a fresh run). pytest-xdist's work stealing gives each worker a contiguous share
+    of the collection and steals from the ends of the queues, so tests at the head of the
+    collection all run on one worker, one after the other.
+    """
+    items.sort(key=lambda item: item.path.name != "test_hostile.py")
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _release_compiled_programs():
     """Drop JAX's compiled programs after each test module.
